@@ -1,0 +1,21 @@
+"""spaceid-gym: identify the inertial parameters of robots from their own motion data.
+
+Importing the package registers the Gymnasium environment ``FreeFloatingID-v0``.
+"""
+
+from __future__ import annotations
+
+from gymnasium.envs.registration import register, registry
+
+from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.robots import Robot, available_robots, load_robot
+
+__version__ = "0.1.0"
+__all__ = ["Robot", "SpaceIdInputError", "__version__", "available_robots", "load_robot"]
+
+if "FreeFloatingID-v0" not in registry:
+    register(
+        id="FreeFloatingID-v0",
+        entry_point="spaceid_gym.envs.free_floating:FreeFloatingIDEnv",
+        max_episode_steps=3000,
+    )

@@ -1,0 +1,271 @@
+"""``FreeFloatingID-v0``: excite a free-floating space robot so that its fuel state can be identified."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from numpy.typing import NDArray
+
+from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.information import information_gain_nats
+from spaceid_gym.log import MeasurementLog
+from spaceid_gym.physics.fuel import base_after_fuel, base_params10_fuel_jacobian, check_fuel
+from spaceid_gym.physics.inertia import RigidBodyInertia
+from spaceid_gym.physics.momentum import twist_parameter_jacobian
+from spaceid_gym.robots import Robot, load_robot
+from spaceid_gym.sim.mission import FuelSchedule
+from spaceid_gym.sim.recorder import LogRecorder
+from spaceid_gym.sim.sensors import Measurement, SensorModel
+from spaceid_gym.sim.simulator import FreeFloatingSimulator
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class RewardWeights:
+    """Weights of the reward's penalty terms (see :class:`FreeFloatingIDEnv`, *Rewards*).
+
+    Attributes:
+        joint_limit: penalty per step for a joint at its limit (quadratic over the last 10 % of
+            the half-range).
+        attitude_per_s: penalty per second of base rate at ``attitude_rate_ref_rad_s``.
+        attitude_rate_ref_rad_s: base rate that costs ``attitude_per_s`` per second (rad/s).
+    """
+
+    joint_limit: float = 1.0
+    attitude_per_s: float = 0.01
+    attitude_rate_ref_rad_s: float = 0.02
+
+
+class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
+    """Free-floating satellite with a robot arm whose fuel state (mass, tank position) is unknown.
+
+    ## Description
+    A satellite base carries an n-joint arm and floats freely (no gravity, no external torque).
+    The agent commands joint rates; the base rotates in reaction (momentum conservation). How
+    much it rotates depends on the base's mass properties, which change as fuel is consumed from
+    a tank at an unknown position. Each episode is one identification window: the agent should
+    move the arm so that the gyro and joint measurements carry as much information as possible
+    about the fuel parameters ``theta = (mdf, bf_x, bf_y, bf_z)``. Between episodes fuel is
+    consumed according to a :class:`~spaceid_gym.sim.mission.FuelSchedule`.
+
+    ## Action Space
+    ``Box(-1, 1, (n,), float32)``: joint-rate commands normalised by each joint's rate limit. They
+    are held for one control period and followed through an acceleration-limited rate servo.
+    Values outside [-1, 1] are clipped; NaN or infinite values raise ``ValueError``.
+
+    ## Observation Space
+    ``Box(-inf, inf, (2n + 7,), float32)``, all *measured* (noisy) values:
+
+    | index            | observation                                   | unit  |
+    |------------------|-----------------------------------------------|-------|
+    | 0 .. n-1         | joint angles q                                | rad   |
+    | n .. 2n-1        | joint rates dq                                | rad/s |
+    | 2n .. 2n+2       | base angular rate, base body frame (gyro)     | rad/s |
+    | 2n+3 .. 2n+6     | base attitude quaternion w, x, y, z (base to inertial) | - |
+
+    The true parameters are never in the observation.
+
+    ## Rewards
+    ``r = information gain - joint-limit penalty - attitude penalty`` where
+
+    * information gain = ``0.5 (log det F_t - log det F_{t-1})`` (nats), ``F`` the accumulated
+      Fisher information of the gyro measurements about the fuel parameters, in units scaled by
+      the prior ranges (usable fuel mass, tank box half-width), starting from the prior ``F_0 = I``.
+      Summed over an episode it is the total information gained, ``0.5 log det F_T``.
+    * joint-limit penalty = ``joint_limit * sum_j max(0, (|q_j - mid_j| / half_j - 0.9) / 0.1)^2``.
+    * attitude penalty = ``attitude_per_s * dt * (|omega_base| / attitude_rate_ref_rad_s)^2``.
+
+    ## Starting State
+    Joint rates zero, joint angles uniformly within +-0.3 rad of the home configuration (clipped
+    to the limits), base attitude identity, system momentum zero. Fuel state: see *Episode End*.
+
+    ## Episode End
+    The episode is truncated by the ``TimeLimit`` wrapper (registered default 3000 steps, 60 s at
+    the default 50 Hz); pass ``max_episode_steps`` to ``gym.make`` for another window length.
+    ``reset(seed=...)`` starts a new satellite (new tank position, first fuel state); ``reset()``
+    without a seed moves to the next identification window of the same satellite (more fuel
+    consumed). ``reset(options={"fuel_consumed_kg": ..., "tank_position_m": ...})`` sets either.
+
+    ## Info
+    ``truth``: ``fuel_consumed_kg``, ``tank_position_m``, ``base_mass_kg``, ``base_com_m``,
+    ``base_inertia_kgm2``, ``episode``; step infos add ``information_gain``, ``penalty_joint_limit``,
+    ``penalty_attitude``, ``log_det_fisher``.
+
+    ## Arguments
+    ``robot`` (name or URDF path, default ``"paper6"``), ``control_period_s`` (0.02),
+    ``sensors`` (:class:`~spaceid_gym.sim.sensors.SensorModel`, ``None`` for defaults, or
+    ``"noise_free"``), ``fuel_schedule`` (:class:`~spaceid_gym.sim.mission.FuelSchedule`),
+    ``tank_position_m`` (fixed tank, default drawn per satellite), ``reward_weights``
+    (:class:`RewardWeights`), ``render_mode`` (``"rgb_array"`` or ``None``).
+    The measurement log of the current episode: :meth:`measurement_log`.
+    """
+
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 50}
+
+    def __init__(
+        self,
+        robot: str | Robot = "paper6",
+        control_period_s: float = 0.02,
+        sensors: SensorModel | str | None = None,
+        fuel_schedule: FuelSchedule | None = None,
+        tank_position_m: FloatArray | None = None,
+        reward_weights: RewardWeights | None = None,
+        render_mode: str | None = None,
+    ) -> None:
+        self.robot = robot if isinstance(robot, Robot) else load_robot(robot)
+        if not (np.isfinite(control_period_s) and control_period_s > 0.0):
+            raise SpaceIdInputError(f"control_period_s: expected a positive number of seconds, got {control_period_s!r}")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise SpaceIdInputError(f"render_mode: expected one of {self.metadata['render_modes']} or None, got {render_mode!r}")
+        self.control_period_s = float(control_period_s)
+        self.sensors = _sensor_model(sensors)
+        self.fuel_schedule = fuel_schedule if fuel_schedule is not None else FuelSchedule()
+        base_full = self.robot.base_full
+        self._fixed_tank = None if tank_position_m is None else np.asarray(tank_position_m, dtype=float)
+        if self._fixed_tank is not None:
+            check_fuel(base_full, 0.0, self._fixed_tank)
+        self.reward_weights = reward_weights if reward_weights is not None else RewardWeights()
+        self.render_mode = render_mode
+        n = self.robot.n_joints
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(n,), dtype=np.float32)
+        self.observation_space = spaces.Box(-np.inf, np.inf, shape=(2 * n + 7,), dtype=np.float32)
+        # prior ranges: they scale the fuel parameters so that the Fisher information is unit-free
+        self._param_scale = np.array(
+            [self.fuel_schedule.usable_fraction * base_full.mass_kg] + [self.fuel_schedule.tank_half_width_m(base_full)] * 3
+        )
+        mid = 0.5 * (self.robot.q_lower_rad + self.robot.q_upper_rad)
+        half = 0.5 * (self.robot.q_upper_rad - self.robot.q_lower_rad)
+        self._joint_mid, self._joint_half = mid, half
+        self._gyro_std_for_information = (
+            self.sensors.gyro_std_rad_s(self.control_period_s)
+            if self.sensors.gyro_arw_rad_sqrt_s > 0.0
+            else SensorModel().gyro_std_rad_s(self.control_period_s)
+        )
+        self._tank: FloatArray | None = None
+        self._fuel_consumed_kg = 0.0
+        self._episode = -1
+        self._renderer: Any = None
+
+    # ------------------------------------------------------------------ gym API
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[NDArray[np.float32], dict[str, Any]]:
+        super().reset(seed=seed)
+        options = dict(options or {})
+        base_full = self.robot.base_full
+        new_satellite = seed is not None or self._tank is None
+        if new_satellite:
+            self._tank = (
+                self._fixed_tank.copy()
+                if self._fixed_tank is not None
+                else self.fuel_schedule.draw_tank_position(base_full, self.np_random)
+            )
+            self._fuel_consumed_kg = self.fuel_schedule.first(base_full)
+            self._episode = 0
+        else:
+            self._fuel_consumed_kg = self.fuel_schedule.next(self._fuel_consumed_kg, base_full, self.np_random)
+            self._episode += 1
+        if "tank_position_m" in options:
+            self._tank = np.asarray(options.pop("tank_position_m"), dtype=float)
+        if "fuel_consumed_kg" in options:
+            self._fuel_consumed_kg = float(options.pop("fuel_consumed_kg"))
+        if options:
+            raise SpaceIdInputError(f"reset options: unknown keys {sorted(options)}; expected fuel_consumed_kg, tank_position_m")
+        assert self._tank is not None
+        base = base_after_fuel(base_full, self._fuel_consumed_kg, self._tank)
+        self._theta = np.concatenate(([self._fuel_consumed_kg], self._tank))
+        self._dparams = base_params10_fuel_jacobian(base_full.com_m, self._theta) * self._param_scale
+        self.simulator = FreeFloatingSimulator(self.robot, base)
+        q0 = self.robot.home_configuration() + self.np_random.uniform(-0.3, 0.3, size=self.robot.n_joints)
+        state = self.simulator.reset(q0_rad=np.clip(q0, self.robot.q_lower_rad, self.robot.q_upper_rad))
+        self._recorder = LogRecorder(self.sensors, self.control_period_s, self.np_random)
+        self._fisher = np.eye(4)
+        self._fisher_update(state.composite_inertia, state.v_base_body)
+        self._truth = _truth_info(self._fuel_consumed_kg, self._tank, base, self._episode)
+        return self._observation(self._recorder.record(state)), {"truth": self._truth}
+
+    def step(self, action: NDArray[np.float32]) -> tuple[NDArray[np.float32], float, bool, bool, dict[str, Any]]:
+        a = np.asarray(action, dtype=float)
+        if a.shape != self.action_space.shape:
+            raise ValueError(f"action: expected shape {self.action_space.shape}, got {a.shape}")
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"action: expected finite values in [-1, 1], got {a.tolist()}")
+        rates = np.clip(a, -1.0, 1.0) * self.robot.rate_limit_rad_s
+        state = self.simulator.step(rates, self.control_period_s)
+        sample = self._recorder.record(state)
+        gain = self._fisher_update(state.composite_inertia, state.v_base_body)
+        weights = self.reward_weights
+        excess = np.maximum(0.0, (np.abs(state.q_rad - self._joint_mid) / self._joint_half - 0.9) / 0.1)
+        penalty_limit = weights.joint_limit * float(excess @ excess)
+        omega = state.v_base_body[3:]
+        penalty_attitude = (
+            weights.attitude_per_s * self.control_period_s * float(omega @ omega) / weights.attitude_rate_ref_rad_s**2
+        )
+        info = {
+            "truth": self._truth,
+            "information_gain": gain,
+            "penalty_joint_limit": penalty_limit,
+            "penalty_attitude": penalty_attitude,
+        }
+        return self._observation(sample), gain - penalty_limit - penalty_attitude, False, False, info
+
+    def render(self) -> NDArray[np.uint8] | None:
+        if self.render_mode != "rgb_array":
+            return None
+        from spaceid_gym.envs.render import RobotRenderer, base_half_extents_from_inertia
+
+        if self._renderer is None:
+            base = self.robot.base_full
+            extents = base_half_extents_from_inertia(base.mass_kg, base.inertia_com_kgm2)
+            self._renderer = RobotRenderer(self.simulator.model, extents, 480, 480)
+        state = self.simulator.state
+        text = f"t = {state.t_s:6.2f} s   fuel consumed {self._fuel_consumed_kg:5.1f} kg   episode {self._episode}"
+        return self._renderer.render(state.pinocchio_configuration(), info_text=text)
+
+    # ------------------------------------------------------------------ extras
+    def measurement_log(self) -> MeasurementLog:
+        """The measurements of the current episode so far (one sample per control period)."""
+        return self._recorder.log()
+
+    @property
+    def fisher_information(self) -> FloatArray:
+        """Accumulated Fisher information about ``theta`` scaled by the prior ranges, (4, 4)."""
+        return self._fisher.copy()
+
+    # ------------------------------------------------------------------ internals
+    def _fisher_update(self, composite: Any, twist: FloatArray) -> float:
+        jac = twist_parameter_jacobian(composite, twist, self._dparams)[3:]  # d omega / d theta_scaled
+        before = self._fisher
+        self._fisher = before + (jac.T @ jac) / self._gyro_std_for_information**2
+        return information_gain_nats(before, self._fisher)
+
+    def _observation(self, sample: Measurement) -> NDArray[np.float32]:
+        return np.concatenate(
+            (sample.q_rad, sample.dq_rad_s, sample.omega_base_body_rad_s, sample.quat_base_to_inertial_wxyz)
+        ).astype(np.float32)
+
+
+def _sensor_model(sensors: SensorModel | str | None) -> SensorModel:
+    if sensors is None:
+        return SensorModel()
+    if isinstance(sensors, SensorModel):
+        return sensors
+    if sensors == "noise_free":
+        return SensorModel.noise_free()
+    raise SpaceIdInputError(f"sensors: expected a SensorModel, None or 'noise_free', got {sensors!r}")
+
+
+def _truth_info(fuel_consumed_kg: float, tank_m: FloatArray, base: RigidBodyInertia, episode: int) -> dict[str, Any]:
+    return {
+        "fuel_consumed_kg": fuel_consumed_kg,
+        "tank_position_m": tank_m.tolist(),
+        "base_mass_kg": base.mass_kg,
+        "base_com_m": np.asarray(base.com_m).tolist(),
+        "base_inertia_kgm2": np.asarray(base.inertia_com_kgm2).tolist(),
+        "episode": episode,
+    }

@@ -1,0 +1,567 @@
+"""Measurement logs of a free-floating robot and the dataset folder that holds them.
+
+A :class:`MeasurementLog` is one window of measurements of a robot with ``n`` arm joints: time,
+joint angles and rates, the base angular velocity in the base body frame (what a gyro measures)
+and, optionally, the base attitude. It is stored as a CSV file with the header
+
+    t,q1,...,qN,dq1,...,dqN,wx,wy,wz[,qw,qx,qy,qz]
+
+(SI units: s, rad, rad/s; the quaternion is scalar first, base-to-inertial). Values are written
+with ``repr`` so a write/read round trip is bit exact.
+
+A dataset folder holds ``log.csv``, ``robot.urdf`` and, for simulated data, ``truth.json``
+(:func:`write_dataset`, :func:`load_dataset`). Every file is written atomically (temporary file in
+the same directory, then ``os.replace``), so a failure never leaves a half-written file.
+
+Every input problem raises :class:`~spaceid_gym.errors.SpaceIdInputError` naming the file, the
+column and the row.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import secrets
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager, suppress
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, TextIO
+
+import numpy as np
+from numpy.typing import NDArray
+
+from spaceid_gym.errors import SpaceIdInputError
+
+FloatArray = NDArray[np.float64]
+PathLike = str | os.PathLike[str]
+
+LOG_FILENAME = "log.csv"
+URDF_FILENAME = "robot.urdf"
+TRUTH_FILENAME = "truth.json"
+
+_OMEGA_COLUMNS = ("wx", "wy", "wz")
+_QUAT_COLUMNS = ("qw", "qx", "qy", "qz")
+_HEADER_FORMAT = "t,q1,...,qN,dq1,...,dqN,wx,wy,wz[,qw,qx,qy,qz]"
+
+
+def _column_names(n_joints: int, with_quaternion: bool) -> list[str]:
+    """CSV column names for a log with ``n_joints`` joints."""
+    names = ["t", *(f"q{i}" for i in range(1, n_joints + 1)), *(f"dq{i}" for i in range(1, n_joints + 1))]
+    names += _OMEGA_COLUMNS
+    if with_quaternion:
+        names += _QUAT_COLUMNS
+    return names
+
+
+def _column_fields(n_joints: int, with_quaternion: bool) -> list[str]:
+    """The :class:`MeasurementLog` array element behind each CSV column (for error messages)."""
+    fields = ["t_s", *(f"q_rad[:, {i}]" for i in range(n_joints)), *(f"dq_rad_s[:, {i}]" for i in range(n_joints))]
+    fields += [f"omega_base_body_rad_s[:, {i}]" for i in range(3)]
+    if with_quaternion:
+        fields += [f"quat_base_to_inertial_wxyz[:, {i}]" for i in range(4)]
+    return fields
+
+
+def _sample_index_label(i: int) -> str:
+    return f"sample index {i} (0-based)"
+
+
+def _format_row(values: list[float]) -> str:
+    """One CSV line; ``repr`` of a float is the shortest string that reads back bit exact."""
+    return ",".join(map(repr, values)) + "\n"
+
+
+def _table(t: FloatArray, q: FloatArray, dq: FloatArray, omega: FloatArray, quat: FloatArray | None) -> FloatArray:
+    """All columns side by side, shape (T, 1 + 2n + 3 [+ 4]), in CSV column order."""
+    parts = [t[:, None], q, dq, omega]
+    if quat is not None:
+        parts.append(quat)
+    return np.hstack(parts)
+
+
+def _check_arrays(
+    source: str,
+    row_label: Callable[[int], str],
+    t: FloatArray,
+    q: FloatArray,
+    dq: FloatArray,
+    omega: FloatArray,
+    quat: FloatArray | None,
+) -> None:
+    """Shapes, finiteness, strictly increasing time; errors start with ``source``, rows via ``row_label``."""
+    if t.ndim != 1:
+        raise SpaceIdInputError(f"{source}: t_s must have shape (T,), got shape {t.shape}")
+    n_samples = t.shape[0]
+    if n_samples < 2:
+        raise SpaceIdInputError(f"{source}: a log needs at least 2 samples, got {n_samples}")
+    if q.ndim != 2 or q.shape[0] != n_samples or q.shape[1] < 1:
+        raise SpaceIdInputError(f"{source}: q_rad must have shape (T, n) = ({n_samples}, n) with n >= 1, got shape {q.shape}")
+    n = q.shape[1]
+    expected_shapes: list[tuple[str, FloatArray | None, tuple[int, int]]] = [
+        ("dq_rad_s", dq, (n_samples, n)),
+        ("omega_base_body_rad_s", omega, (n_samples, 3)),
+        ("quat_base_to_inertial_wxyz", quat, (n_samples, 4)),
+    ]
+    for name, array, shape in expected_shapes:
+        if array is not None and array.shape != shape:
+            raise SpaceIdInputError(f"{source}: {name} must have shape {shape}, got shape {array.shape}")
+
+    table = _table(t, q, dq, omega, quat)
+    bad = ~np.isfinite(table)
+    if bad.any():
+        row = int(np.argmax(bad.any(axis=1)))
+        col = int(np.argmax(bad[row]))
+        name = _column_names(n, quat is not None)[col]
+        field = _column_fields(n, quat is not None)[col]
+        raise SpaceIdInputError(
+            f"{source}: column '{name}' ({field}) has the non-finite value {float(table[row, col])!r} at "
+            f"{row_label(row)}; expected a finite number"
+        )
+    not_increasing = np.diff(t) <= 0.0
+    if not_increasing.any():
+        i = int(np.argmax(not_increasing)) + 1
+        raise SpaceIdInputError(
+            f"{source}: column 't' must be strictly increasing, but {row_label(i)} has t = {float(t[i])!r} s, "
+            f"not greater than t = {float(t[i - 1])!r} s at {row_label(i - 1)}"
+        )
+
+
+@dataclass(frozen=True, eq=False, repr=False)
+class MeasurementLog:
+    """One window of measurements of a free-floating robot with ``n`` arm joints.
+
+    The constructor copies the arrays to read-only float64 arrays and validates them (shapes,
+    finite values, strictly increasing time), raising :class:`SpaceIdInputError` otherwise.
+
+    Attributes:
+        t_s: time, shape (T,), s, strictly increasing, T >= 2.
+        q_rad: joint angles, shape (T, n), rad.
+        dq_rad_s: joint rates, shape (T, n), rad/s.
+        omega_base_body_rad_s: base angular velocity in the base body frame, shape (T, 3), rad/s.
+        quat_base_to_inertial_wxyz: base attitude, shape (T, 4), unit quaternion ``(w, x, y, z)``
+            rotating base-frame vectors into the inertial frame; ``None`` if not measured.
+    """
+
+    t_s: FloatArray
+    q_rad: FloatArray
+    dq_rad_s: FloatArray
+    omega_base_body_rad_s: FloatArray
+    quat_base_to_inertial_wxyz: FloatArray | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("t_s", "q_rad", "dq_rad_s", "omega_base_body_rad_s", "quat_base_to_inertial_wxyz"):
+            value = getattr(self, name)
+            if value is None and name == "quat_base_to_inertial_wxyz":
+                continue
+            try:
+                array = np.array(value, dtype=np.float64)
+            except (TypeError, ValueError) as exc:
+                raise SpaceIdInputError(f"MeasurementLog: {name} must be an array of numbers ({exc})") from exc
+            array.flags.writeable = False
+            object.__setattr__(self, name, array)
+        self.validate("MeasurementLog")
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def n_joints(self) -> int:
+        """Number of arm joints ``n``."""
+        return int(self.q_rad.shape[1])
+
+    @property
+    def n_samples(self) -> int:
+        """Number of samples ``T``."""
+        return int(self.t_s.shape[0])
+
+    @property
+    def duration_s(self) -> float:
+        """``t[-1] - t[0]``, s."""
+        return float(self.t_s[-1] - self.t_s[0])
+
+    @property
+    def sample_period_s(self) -> float:
+        """Median time step, s."""
+        return float(np.median(np.diff(self.t_s)))
+
+    def __len__(self) -> int:
+        return self.n_samples
+
+    def __repr__(self) -> str:
+        quat = "yes" if self.quat_base_to_inertial_wxyz is not None else "no"
+        return (
+            f"MeasurementLog(n_samples={self.n_samples}, n_joints={self.n_joints}, "
+            f"t=[{self.t_s[0]:g}, {self.t_s[-1]:g}] s, quaternion={quat})"
+        )
+
+    # ------------------------------------------------------------------ validation
+    def validate(self, source: str) -> MeasurementLog:
+        """Check shapes, finiteness and strictly increasing time; return ``self``.
+
+        Args:
+            source: what the log came from (a file name, ``"simulator"``, ...); starts every
+                error message.
+
+        Raises:
+            SpaceIdInputError: naming ``source``, the column and the first bad sample index.
+        """
+        _check_arrays(
+            source,
+            _sample_index_label,
+            self.t_s,
+            self.q_rad,
+            self.dq_rad_s,
+            self.omega_base_body_rad_s,
+            self.quat_base_to_inertial_wxyz,
+        )
+        return self
+
+    def _table(self) -> FloatArray:
+        """All columns side by side, shape (T, 1 + 2n + 3 [+ 4]), in CSV column order."""
+        return _table(self.t_s, self.q_rad, self.dq_rad_s, self.omega_base_body_rad_s, self.quat_base_to_inertial_wxyz)
+
+    # ------------------------------------------------------------------ slicing
+    def window(self, t_start_s: float, t_end_s: float) -> MeasurementLog:
+        """The samples with ``t_start_s <= t < t_end_s`` (s), as a new log.
+
+        Raises:
+            SpaceIdInputError: if ``t_end_s <= t_start_s`` or the window holds fewer than 2 samples.
+        """
+        if not t_end_s > t_start_s:
+            raise SpaceIdInputError(f"window: t_end_s = {float(t_end_s)!r} must be greater than t_start_s = {float(t_start_s)!r}")
+        mask = (self.t_s >= t_start_s) & (self.t_s < t_end_s)
+        count = int(mask.sum())
+        if count < 2:
+            raise SpaceIdInputError(
+                f"window [{float(t_start_s)!r}, {float(t_end_s)!r}) s holds {count} samples of the log spanning "
+                f"[{float(self.t_s[0])!r}, {float(self.t_s[-1])!r}] s; need at least 2"
+            )
+        quat = self.quat_base_to_inertial_wxyz
+        return MeasurementLog(
+            t_s=self.t_s[mask],
+            q_rad=self.q_rad[mask],
+            dq_rad_s=self.dq_rad_s[mask],
+            omega_base_body_rad_s=self.omega_base_body_rad_s[mask],
+            quat_base_to_inertial_wxyz=None if quat is None else quat[mask],
+        )
+
+    # ------------------------------------------------------------------ CSV
+    def to_csv(self, path: PathLike) -> Path:
+        """Write the log as CSV (header ``t,q1,...,qN,dq1,...,dqN,wx,wy,wz[,qw,qx,qy,qz]``), atomically.
+
+        Values are written bit exact (``repr``). The file is first written to a temporary file in
+        the same directory and then renamed over ``path``; on any error ``path`` is untouched and
+        the temporary file is removed.
+
+        Returns:
+            ``path`` as a :class:`~pathlib.Path`.
+        """
+        path = Path(path)
+        header = _column_names(self.n_joints, self.quat_base_to_inertial_wxyz is not None)
+        with _atomic_open(path) as f:
+            f.write(",".join(header) + "\n")
+            for values in self._table().tolist():
+                f.write(_format_row(values))
+        return path
+
+    @classmethod
+    def from_csv(cls, path: PathLike, n_joints: int | None = None) -> MeasurementLog:
+        """Read a log written by :meth:`to_csv` (or by hand in the same format).
+
+        Args:
+            path: the CSV file.
+            n_joints: the robot's number of arm joints; if given, the file must have as many.
+
+        Raises:
+            SpaceIdInputError: naming the file and, where relevant, the column and the row (as
+                "data row k (file line L)", both 1-based; the header is file line 1 unless blank
+                lines precede it).
+        """
+        path = Path(path)
+        rows, line_numbers = _read_csv_rows(path)
+        if not rows:
+            raise SpaceIdInputError(f"{path}: file is empty; expected a header line '{_HEADER_FORMAT}' and data rows")
+        header = [cell.strip() for cell in rows[0]]
+        n, with_quat = _parse_header(path, header, line_numbers[0])
+        if n_joints is not None and n != n_joints:
+            raise SpaceIdInputError(f"{path} has {n} joints (q1..q{n}), the robot has {n_joints}")
+
+        data_rows, data_lines = rows[1:], line_numbers[1:]
+        if len(data_rows) < 2:
+            raise SpaceIdInputError(f"{path}: {len(data_rows)} data rows after the header; a log needs at least 2")
+
+        def row_label(i: int) -> str:
+            return f"data row {i + 1} (file line {data_lines[i]})"
+
+        n_columns = len(header)
+        table = np.empty((len(data_rows), n_columns), dtype=np.float64)
+        for i, row in enumerate(data_rows):
+            if len(row) != n_columns:
+                raise SpaceIdInputError(
+                    f"{path}: {row_label(i)} has {len(row)} values, expected {n_columns} (one per header column)"
+                )
+            try:
+                table[i] = [float(cell) for cell in row]
+            except ValueError:
+                for j, cell in enumerate(row):
+                    try:
+                        float(cell)
+                    except ValueError:
+                        raise SpaceIdInputError(
+                            f"{path}: column '{header[j]}' (column {j + 1}), {row_label(i)}: {cell.strip()!r} is not a number"
+                        ) from None
+                raise  # pragma: no cover - float() failed on the row but on no single cell
+        bad = ~np.isfinite(table)
+        if bad.any():
+            i = int(np.argmax(bad.any(axis=1)))
+            j = int(np.argmax(bad[i]))
+            raise SpaceIdInputError(
+                f"{path}: column '{header[j]}' (column {j + 1}), {row_label(i)}: "
+                f"{data_rows[i][j].strip()!r} is not a finite number"
+            )
+
+        fields = {
+            "t_s": table[:, 0],
+            "q_rad": table[:, 1 : 1 + n],
+            "dq_rad_s": table[:, 1 + n : 1 + 2 * n],
+            "omega_base_body_rad_s": table[:, 1 + 2 * n : 4 + 2 * n],
+            "quat_base_to_inertial_wxyz": table[:, 4 + 2 * n : 8 + 2 * n] if with_quat else None,
+        }
+        # Check with file row labels first, so an error names the file line (the constructor's
+        # own check then passes).
+        _check_arrays(str(path), row_label, *fields.values())
+        return cls(**fields)
+
+
+def _read_csv_rows(path: Path) -> tuple[list[list[str]], list[int]]:
+    """Non-blank CSV rows of ``path`` and their 1-based file line numbers."""
+    if not path.exists():
+        raise SpaceIdInputError(f"{path}: file not found")
+    if not path.is_file():
+        raise SpaceIdInputError(f"{path}: not a file")
+    rows: list[list[str]] = []
+    line_numbers: list[int] = []
+    try:
+        with open(path, encoding="utf-8-sig", newline="") as f:
+            reader = csv.reader(f)
+            line = 1
+            for row in reader:
+                if any(cell.strip() for cell in row):
+                    rows.append(row)
+                    line_numbers.append(line)
+                line = reader.line_num + 1
+    except UnicodeDecodeError as exc:
+        raise SpaceIdInputError(f"{path}: not a UTF-8 text file ({exc.reason} at byte {exc.start})") from exc
+    except csv.Error as exc:
+        raise SpaceIdInputError(f"{path}: malformed CSV near file line {line}: {exc}") from exc
+    except OSError as exc:
+        raise SpaceIdInputError(f"{path}: cannot read: {exc.strerror}") from exc
+    return rows, line_numbers
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _parse_header(path: Path, header: list[str], line: int) -> tuple[int, bool]:
+    """``(n_joints, with_quaternion)`` from the header cells; raise naming the first wrong column."""
+    if _is_number(header[0]):
+        raise SpaceIdInputError(
+            f"{path}: missing header; file line {line} starts with the number {header[0]!r}, "
+            f"expected the header '{_HEADER_FORMAT}'"
+        )
+    # n = number of leading q<k> columns after 't'; the rest of the layout follows from it.
+    n = 0
+    while 1 + n < len(header) and header[1 + n].startswith("q") and header[1 + n][1:].isdigit():
+        n += 1
+    if n == 0:
+        found = f"is '{header[1]}'" if len(header) > 1 else "is missing"
+        if header[0] == "t":
+            raise SpaceIdInputError(
+                f"{path}: column 2 {found}, expected 'q1' (joint angles q1..qN follow 't'; header format '{_HEADER_FORMAT}')"
+            )
+    base = _column_names(n, with_quaternion=False)
+    for j, expected in enumerate(base):
+        if j >= len(header):
+            raise SpaceIdInputError(
+                f"{path}: column {j + 1} is missing, expected '{expected}' "
+                f"(the header ends after column {len(header)} '{header[-1]}'; format '{_HEADER_FORMAT}')"
+            )
+        if header[j] != expected:
+            hint = ""
+            if expected.startswith("dq"):
+                hint = f" ({n} joint-angle columns q1..q{n} need {n} joint-rate columns dq1..dq{n})"
+            raise SpaceIdInputError(f"{path}: column {j + 1} is '{header[j]}', expected '{expected}'{hint}")
+    rest = header[len(base) :]
+    if not rest:
+        return n, False
+    if rest == list(_QUAT_COLUMNS):
+        return n, True
+    if len(rest) < len(_QUAT_COLUMNS) and all(name in _QUAT_COLUMNS for name in rest):
+        raise SpaceIdInputError(
+            f"{path}: quaternion columns must be all four 'qw,qx,qy,qz' or none; found only '{','.join(rest)}'"
+        )
+    for k, name in enumerate(rest):
+        j = len(base) + k
+        if k >= len(_QUAT_COLUMNS):
+            raise SpaceIdInputError(
+                f"{path}: unexpected column {j + 1} '{name}'; the header ends after 'qz' (format '{_HEADER_FORMAT}')"
+            )
+        if name != _QUAT_COLUMNS[k]:
+            raise SpaceIdInputError(
+                f"{path}: column {j + 1} is '{name}', expected '{_QUAT_COLUMNS[k]}' "
+                f"(after 'wz' come either no columns or the quaternion 'qw,qx,qy,qz')"
+            )
+    raise SpaceIdInputError(  # pragma: no cover - every other case is handled above
+        f"{path}: quaternion columns must be all four 'qw,qx,qy,qz' or none; found '{','.join(rest)}'"
+    )
+
+
+# ---------------------------------------------------------------------- atomic writes
+@contextmanager
+def _atomic_open(path: Path) -> Iterator[TextIO]:
+    """Open a temporary file next to ``path`` for writing; on success rename it over ``path``.
+
+    On any exception the temporary file is removed and ``path`` keeps its previous content.
+    """
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
+    try:
+        f = open(tmp, "x", encoding="utf-8", newline="\n")  # noqa: SIM115 - closed by the with below
+    except OSError as exc:
+        raise SpaceIdInputError(f"{path}: cannot write: {exc.strerror}") from exc
+    try:
+        with f:
+            yield f
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        with suppress(OSError):
+            tmp.unlink()
+        raise
+
+
+def _write_text_atomic(path: Path, text: str) -> None:
+    with _atomic_open(path) as f:
+        f.write(text)
+
+
+# ---------------------------------------------------------------------- dataset folders
+@dataclass
+class Dataset:
+    """A dataset folder: ``log.csv``, ``robot.urdf`` and, for simulated data, ``truth.json``.
+
+    Attributes:
+        log: the measurements.
+        robot_urdf_path: path of ``robot.urdf`` in the folder.
+        truth: the parsed ``truth.json`` (true parameters of simulated data), ``None`` if absent.
+        path: the folder.
+    """
+
+    log: MeasurementLog
+    robot_urdf_path: Path
+    truth: dict[str, Any] | None
+    path: Path
+
+
+def _to_json(value: Any, where: str) -> Any:
+    """``value`` with numpy arrays/scalars (and tuples, paths) turned into plain JSON types."""
+    if isinstance(value, np.ndarray):
+        return _to_json(value.tolist(), where)
+    if isinstance(value, np.generic):
+        return _to_json(value.item(), where)
+    if value is None or isinstance(value, (bool, int, str)):
+        return value
+    if isinstance(value, float):
+        if not math.isfinite(value):
+            raise SpaceIdInputError(f"truth{where}: {value!r} cannot be written to JSON; expected a finite number")
+        return value
+    if isinstance(value, dict):
+        out = {}
+        for key, item in value.items():
+            if not isinstance(key, str):
+                raise SpaceIdInputError(f"truth{where}: key {key!r} must be a string")
+            out[str(key)] = _to_json(item, f"{where}[{str(key)!r}]")
+        return out
+    if isinstance(value, (list, tuple)):
+        return [_to_json(item, f"{where}[{i}]") for i, item in enumerate(value)]
+    if isinstance(value, os.PathLike):
+        return os.fspath(value)
+    raise SpaceIdInputError(f"truth{where}: cannot write a {type(value).__name__} to JSON")
+
+
+def write_dataset(directory: PathLike, log: MeasurementLog, urdf_text: str, truth: dict[str, Any] | None = None) -> Path:
+    """Write a dataset folder (created with parents if needed); every file is written atomically.
+
+    Args:
+        directory: the folder; existing ``log.csv``/``robot.urdf``/``truth.json`` are replaced.
+        log: the measurements, written to ``log.csv``.
+        urdf_text: the robot's URDF source, written to ``robot.urdf`` unchanged.
+        truth: true parameters of simulated data, written to ``truth.json`` (indent 2, sorted
+            keys; numpy arrays and scalars become lists and numbers). ``None`` (real data) writes
+            no ``truth.json`` and removes a stale one.
+
+    Returns:
+        The folder as a :class:`~pathlib.Path`.
+    """
+    directory = Path(directory)
+    truth_text = None if truth is None else json.dumps(_to_json(truth, ""), indent=2, sort_keys=True) + "\n"
+    if directory.exists() and not directory.is_dir():
+        raise SpaceIdInputError(f"{directory}: exists and is not a folder; cannot write a dataset there")
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise SpaceIdInputError(f"{directory}: cannot create the dataset folder: {exc.strerror}") from exc
+    log.to_csv(directory / LOG_FILENAME)
+    _write_text_atomic(directory / URDF_FILENAME, urdf_text)
+    truth_path = directory / TRUTH_FILENAME
+    if truth_text is None:
+        with suppress(FileNotFoundError):
+            truth_path.unlink()
+    else:
+        _write_text_atomic(truth_path, truth_text)
+    return directory
+
+
+def load_dataset(directory: PathLike, n_joints: int | None = None) -> Dataset:
+    """Load a dataset folder written by :func:`write_dataset` (or assembled by hand).
+
+    Args:
+        directory: the folder with ``log.csv``, ``robot.urdf`` and optionally ``truth.json``.
+        n_joints: if given, the log must have this many joints (see :meth:`MeasurementLog.from_csv`).
+
+    Raises:
+        SpaceIdInputError: if the folder, ``log.csv`` or ``robot.urdf`` is missing, the log is
+            malformed, or ``truth.json`` is not a JSON object.
+    """
+    directory = Path(directory)
+    if not directory.exists():
+        raise SpaceIdInputError(f"{directory}: dataset folder not found")
+    if not directory.is_dir():
+        raise SpaceIdInputError(f"{directory}: not a folder; expected a dataset folder with {LOG_FILENAME} and {URDF_FILENAME}")
+    for name in (LOG_FILENAME, URDF_FILENAME):
+        if not (directory / name).is_file():
+            raise SpaceIdInputError(
+                f"{directory / name}: file not found; a dataset folder needs {LOG_FILENAME} and {URDF_FILENAME}"
+            )
+    log = MeasurementLog.from_csv(directory / LOG_FILENAME, n_joints=n_joints)
+    truth_path = directory / TRUTH_FILENAME
+    truth: dict[str, Any] | None = None
+    if truth_path.exists():
+        try:
+            parsed = json.loads(truth_path.read_text(encoding="utf-8"))
+        except json.JSONDecodeError as exc:
+            raise SpaceIdInputError(f"{truth_path}: invalid JSON: {exc}") from exc
+        except UnicodeDecodeError as exc:
+            raise SpaceIdInputError(f"{truth_path}: not a UTF-8 text file ({exc.reason})") from exc
+        except OSError as exc:
+            raise SpaceIdInputError(f"{truth_path}: cannot read: {exc.strerror}") from exc
+        if not isinstance(parsed, dict):
+            raise SpaceIdInputError(f"{truth_path}: expected a JSON object, got a {type(parsed).__name__}")
+        truth = parsed
+    return Dataset(log=log, robot_urdf_path=directory / URDF_FILENAME, truth=truth, path=directory)

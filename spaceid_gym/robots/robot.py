@@ -1,0 +1,178 @@
+"""Load and validate a free-floating robot from URDF (pinocchio model with a free-flyer root).
+
+Frames and units
+----------------
+* The **base frame** is the URDF root link's frame. Base velocities are pinocchio "local":
+  ``[v_lin; omega]`` of the base origin, both in the base frame (m/s, rad/s).
+* Joint angles in rad, joint rates in rad/s, torques in N m, masses in kg, lengths in m.
+* pinocchio's configuration is ``[p_world (3), quat (x, y, z, w) (4), q_arm (n)]``.
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+from numpy.typing import NDArray
+
+from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.physics.inertia import RigidBodyInertia
+
+FloatArray = NDArray[np.float64]
+
+_SUPPORTED_JOINTS = {"revolute", "fixed"}
+
+
+def available_robots() -> list[str]:
+    """Names of the robots shipped with the package (``paper6``, ``quick3``, ...)."""
+    files = resources.files("spaceid_gym.robots")
+    return sorted(p.name[: -len(".urdf")] for p in files.iterdir() if p.name.endswith(".urdf"))
+
+
+@dataclass
+class Robot:
+    """A free-floating robot: pinocchio model (free-flyer root), limits and the full-tank base.
+
+    Attributes:
+        name: robot name (URDF ``<robot name>``).
+        urdf_text: the URDF source, as given (written to dataset folders unchanged).
+        model: pinocchio model with a free-flyer root joint and zero gravity (orbital free fall);
+            ``model.inertias[1]`` is the base
+            (the root link plus any links fixed to it) with a full tank.
+        joint_names: the n arm joints, in configuration order.
+        q_lower_rad, q_upper_rad: joint position limits, shape (n,).
+        rate_limit_rad_s: joint rate limits, shape (n,).
+        torque_limit_nm: joint torque limits, shape (n,).
+        base_full: full-tank base mass properties in the base frame.
+    """
+
+    name: str
+    urdf_text: str
+    model: pin.Model
+    joint_names: list[str]
+    q_lower_rad: FloatArray
+    q_upper_rad: FloatArray
+    rate_limit_rad_s: FloatArray
+    torque_limit_nm: FloatArray
+    base_full: RigidBodyInertia
+    source: str = field(default="")
+
+    @property
+    def n_joints(self) -> int:
+        """Number of arm joints n."""
+        return len(self.joint_names)
+
+    def home_configuration(self) -> FloatArray:
+        """A default arm configuration, shape (n,): the middle of each joint's range."""
+        return 0.5 * (self.q_lower_rad + self.q_upper_rad)
+
+    def model_with_base(self, base: RigidBodyInertia) -> pin.Model:
+        """A copy of :attr:`model` whose base (body 1) has the given mass properties."""
+        model = pin.Model(self.model)
+        model.inertias[1] = pin.Inertia(base.mass_kg, np.asarray(base.com_m, float), np.asarray(base.inertia_com_kgm2, float))
+        return model
+
+    def arm_mass_kg(self) -> float:
+        """Total mass of the arm links (everything but the base), kg."""
+        return float(sum(self.model.inertias[i].mass for i in range(2, self.model.njoints)))
+
+
+def load_robot(spec: str | Path) -> Robot:
+    """Load a shipped robot by name (see :func:`available_robots`) or a URDF file by path.
+
+    Raises:
+        SpaceIdInputError: unknown name, missing file, malformed XML, a link without
+            ``<inertial>``, a non-physical inertia, an unsupported joint type, missing limits.
+    """
+    spec_str = str(spec)
+    if spec_str in available_robots():
+        text = resources.files("spaceid_gym.robots").joinpath(f"{spec_str}.urdf").read_text()
+        source = f"{spec_str} (shipped)"
+    else:
+        path = Path(spec_str)
+        if not path.is_file():
+            raise SpaceIdInputError(
+                f"robot '{spec_str}': not a shipped robot ({', '.join(available_robots())}) and no such URDF file"
+            )
+        text = path.read_text()
+        source = str(path)
+    return robot_from_urdf_text(text, source)
+
+
+def robot_from_urdf_text(text: str, source: str = "<string>") -> Robot:
+    """Build a :class:`Robot` from URDF text; ``source`` names it in error messages."""
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as exc:
+        raise SpaceIdInputError(f"{source}: not valid URDF XML ({exc})") from None
+    if root.tag != "robot":
+        raise SpaceIdInputError(f"{source}: the root element is <{root.tag}>, expected <robot>")
+    _check_links_and_joints(root, source)
+    try:
+        model = pin.buildModelFromXML(text, pin.JointModelFreeFlyer())
+    except ValueError as exc:
+        raise SpaceIdInputError(f"{source}: the URDF parser rejected it ({exc})") from None
+    model.gravity = pin.Motion.Zero()  # orbital free fall: no gravity in the orbiting frame
+    if model.njoints < 3:
+        raise SpaceIdInputError(f"{source}: no movable joint found; expected an arm with at least one revolute joint")
+    names = [model.names[i] for i in range(2, model.njoints)]
+    idx_q = [model.joints[i].idx_q for i in range(2, model.njoints)]
+    lower = np.array(model.lowerPositionLimit[idx_q], dtype=float)
+    upper = np.array(model.upperPositionLimit[idx_q], dtype=float)
+    idx_v = [model.joints[i].idx_v for i in range(2, model.njoints)]
+    rate = np.array(model.velocityLimit[idx_v], dtype=float)
+    effort = np.array(model.effortLimit[idx_v], dtype=float)
+    for name, v, e, lo, hi in zip(names, rate, effort, lower, upper, strict=True):
+        if not (v > 0 and np.isfinite(v) and e > 0 and np.isfinite(e)):
+            raise SpaceIdInputError(f"{source}: joint '{name}' needs <limit> with velocity > 0 and effort > 0")
+        if not lo < hi:
+            raise SpaceIdInputError(f"{source}: joint '{name}' has lower limit {lo:g} >= upper limit {hi:g}")
+    base = model.inertias[1]
+    base_full = RigidBodyInertia(float(base.mass), np.array(base.lever), np.array(base.inertia)).validate(
+        f"{source}: base (root link) inertial"
+    )
+    for i in range(2, model.njoints):
+        inertia = model.inertias[i]
+        RigidBodyInertia(float(inertia.mass), np.array(inertia.lever), np.array(inertia.inertia)).validate(
+            f"{source}: link moved by joint '{model.names[i]}'"
+        )
+    return Robot(
+        name=root.get("name", "robot"),
+        urdf_text=text,
+        model=model,
+        joint_names=names,
+        q_lower_rad=lower,
+        q_upper_rad=upper,
+        rate_limit_rad_s=rate,
+        torque_limit_nm=effort,
+        base_full=base_full,
+        source=source,
+    )
+
+
+def _check_links_and_joints(root: ET.Element, source: str) -> None:
+    """Checks pinocchio does not make: every link has a mass, every joint type is supported."""
+    for joint in root.iter("joint"):
+        jtype = joint.get("type")
+        if jtype not in _SUPPORTED_JOINTS:
+            raise SpaceIdInputError(f"{source}: joint '{joint.get('name')}' has type '{jtype}'; supported: revolute, fixed")
+        if jtype == "revolute" and joint.find("limit") is None:
+            raise SpaceIdInputError(f"{source}: joint '{joint.get('name')}' needs <limit> with lower, upper, velocity and effort")
+    for link in root.iter("link"):
+        inertial = link.find("inertial")
+        mass = None if inertial is None else inertial.find("mass")
+        if inertial is None or mass is None or inertial.find("inertia") is None:
+            raise SpaceIdInputError(
+                f"{source}: link '{link.get('name')}' has no <inertial> with <mass> and <inertia>; "
+                "every link needs mass properties"
+            )
+        try:
+            value = float(mass.get("value", "nan"))
+        except ValueError:
+            value = float("nan")
+        if not value > 0:
+            raise SpaceIdInputError(f"{source}: link '{link.get('name')}' has mass {mass.get('value')!r}; expected > 0 kg")

@@ -1,0 +1,1 @@
+"""The truth: time integration of the free-floating robot, its joint servo and its sensors."""

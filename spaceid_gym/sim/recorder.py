@@ -1,0 +1,47 @@
+"""Sampling the simulated truth through the sensors into a measurement log."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from spaceid_gym.log import MeasurementLog
+from spaceid_gym.sim.sensors import Measurement, SensorModel
+from spaceid_gym.sim.simulator import FreeFloatingState
+
+
+class LogRecorder:
+    """Measures states with a sensor model and keeps the samples of one window.
+
+    Args:
+        sensors: noise model.
+        sample_period_s: the sample period (sets the per-sample noise of rate sensors).
+        rng: the seeded generator all noise is drawn from.
+    """
+
+    def __init__(self, sensors: SensorModel, sample_period_s: float, rng: np.random.Generator) -> None:
+        self.sensors = sensors
+        self.sample_period_s = sample_period_s
+        self.rng = rng
+        self._t: list[float] = []
+        self._samples: list[Measurement] = []
+
+    def record(self, state: FreeFloatingState) -> Measurement:
+        """Measure ``state``, keep the sample and return it."""
+        sample = self.sensors.measure(state, self.sample_period_s, self.rng)
+        self._t.append(state.t_s)
+        self._samples.append(sample)
+        return sample
+
+    def __len__(self) -> int:
+        return len(self._t)
+
+    def log(self) -> MeasurementLog:
+        """The samples so far as a :class:`~spaceid_gym.log.MeasurementLog`."""
+        samples = self._samples
+        return MeasurementLog(
+            t_s=np.array(self._t),
+            q_rad=np.array([m.q_rad for m in samples]),
+            dq_rad_s=np.array([m.dq_rad_s for m in samples]),
+            omega_base_body_rad_s=np.array([m.omega_base_body_rad_s for m in samples]),
+            quat_base_to_inertial_wxyz=np.array([m.quat_base_to_inertial_wxyz for m in samples]),
+        ).validate("simulated log")

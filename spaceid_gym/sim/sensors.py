@@ -1,0 +1,117 @@
+"""Sensor models: gyro, joint encoders, joint-rate sensors, star tracker.
+
+Default noise levels are those of hardware classes flown on spacecraft and space manipulators:
+
+* **Gyro** (base angular rate, base body frame): a navigation-grade fibre-optic gyro of the
+  LN-200S class, angle random walk 0.07 deg/sqrt(h) = 2.04e-5 rad/sqrt(s). Sampled as the mean
+  rate over a period ``dt`` its white noise has standard deviation ``ARW / sqrt(dt)``
+  (1.44e-4 rad/s at 50 Hz). An optional constant bias (rad/s), default zero.
+* **Joint encoders**: 20-bit absolute encoders on the joint output (resolution 6.0e-6 rad); the
+  default white noise 5e-6 rad covers quantisation and electronics.
+* **Joint-rate sensors** (resolver/tachometer rate): white noise density 1.4e-5 rad/s/sqrt(Hz),
+  1e-4 rad/s at 50 Hz.
+* **Star tracker** (base attitude): 5 arcsec (2.4e-5 rad) per axis, applied as a small random
+  rotation of the true attitude.
+
+All draws come from the generator passed in (the env's ``np_random``); :meth:`SensorModel.noise_free`
+gives exact measurements.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.sim.lie import quat_from_matrix, so3_exp
+from spaceid_gym.sim.simulator import FreeFloatingState
+
+FloatArray = NDArray[np.float64]
+
+_ARCSEC_RAD = math.pi / (180.0 * 3600.0)
+
+
+@dataclass(frozen=True)
+class SensorModel:
+    """Noise levels of the robot's sensors (see the module docstring for the defaults' sources).
+
+    Attributes:
+        gyro_arw_rad_sqrt_s: gyro angle random walk (rad/sqrt(s)); per-sample std ``ARW/sqrt(dt)``.
+        gyro_bias_rad_s: constant gyro bias, base body frame, shape (3,).
+        joint_angle_noise_rad: encoder white-noise std (rad).
+        joint_rate_noise_density_rad_s_sqrt_hz: joint-rate white-noise density; std ``d/sqrt(dt)``.
+        attitude_noise_rad: star-tracker noise per axis (rad).
+    """
+
+    gyro_arw_rad_sqrt_s: float = 0.07 * math.pi / 180.0 / 60.0
+    gyro_bias_rad_s: tuple[float, float, float] = field(default=(0.0, 0.0, 0.0))
+    joint_angle_noise_rad: float = 5e-6
+    joint_rate_noise_density_rad_s_sqrt_hz: float = 1.4e-5
+    attitude_noise_rad: float = 5.0 * _ARCSEC_RAD
+
+    def __post_init__(self) -> None:
+        for name in (
+            "gyro_arw_rad_sqrt_s",
+            "joint_angle_noise_rad",
+            "joint_rate_noise_density_rad_s_sqrt_hz",
+            "attitude_noise_rad",
+        ):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value >= 0.0):
+                raise SpaceIdInputError(f"sensor noise '{name}': expected a finite value >= 0, got {value!r}")
+        bias = np.asarray(self.gyro_bias_rad_s, dtype=float)
+        if bias.shape != (3,) or not np.all(np.isfinite(bias)):
+            raise SpaceIdInputError(f"sensor 'gyro_bias_rad_s': expected 3 finite numbers (rad/s), got {self.gyro_bias_rad_s!r}")
+
+    @classmethod
+    def noise_free(cls) -> SensorModel:
+        """Exact measurements (no noise, no bias)."""
+        return cls(0.0, (0.0, 0.0, 0.0), 0.0, 0.0, 0.0)
+
+    def gyro_std_rad_s(self, dt_s: float) -> float:
+        """Per-sample gyro noise std at sample period ``dt_s`` (rad/s)."""
+        return self.gyro_arw_rad_sqrt_s / math.sqrt(dt_s)
+
+    def joint_rate_std_rad_s(self, dt_s: float) -> float:
+        """Per-sample joint-rate noise std at sample period ``dt_s`` (rad/s)."""
+        return self.joint_rate_noise_density_rad_s_sqrt_hz / math.sqrt(dt_s)
+
+    def as_dict(self, dt_s: float) -> dict[str, object]:
+        """Noise settings with the per-sample standard deviations at ``dt_s`` (for truth.json)."""
+        return {
+            "gyro_arw_rad_sqrt_s": self.gyro_arw_rad_sqrt_s,
+            "gyro_std_rad_s": self.gyro_std_rad_s(dt_s),
+            "gyro_bias_rad_s": list(self.gyro_bias_rad_s),
+            "joint_angle_noise_rad": self.joint_angle_noise_rad,
+            "joint_rate_noise_density_rad_s_sqrt_hz": self.joint_rate_noise_density_rad_s_sqrt_hz,
+            "joint_rate_std_rad_s": self.joint_rate_std_rad_s(dt_s),
+            "attitude_noise_rad": self.attitude_noise_rad,
+            "sample_period_s": dt_s,
+        }
+
+    def measure(self, state: FreeFloatingState, dt_s: float, rng: np.random.Generator) -> Measurement:
+        """One noisy sample of the state, drawing from ``rng`` in a fixed order."""
+        n = state.q_rad.shape[0]
+        noise = rng.standard_normal(2 * n + 6)
+        q = state.q_rad + self.joint_angle_noise_rad * noise[:n]
+        dq = state.dq_rad_s + self.joint_rate_std_rad_s(dt_s) * noise[n : 2 * n]
+        omega = state.omega_base_body + np.asarray(self.gyro_bias_rad_s) + self.gyro_std_rad_s(dt_s) * noise[2 * n : 2 * n + 3]
+        rot = (
+            state.rot_wb
+            if self.attitude_noise_rad == 0.0
+            else state.rot_wb @ so3_exp(self.attitude_noise_rad * noise[2 * n + 3 :])
+        )
+        return Measurement(q, dq, omega, quat_from_matrix(rot))
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """One sample: joint angles/rates (n,), gyro rate (3,, base body), attitude quaternion [w,x,y,z]."""
+
+    q_rad: FloatArray
+    dq_rad_s: FloatArray
+    omega_base_body_rad_s: FloatArray
+    quat_base_to_inertial_wxyz: FloatArray
