@@ -95,8 +95,8 @@ def _check_arrays(
     if t.ndim != 1:
         raise SpaceIdInputError(f"{source}: t_s must have shape (T,), got shape {t.shape}")
     n_samples = t.shape[0]
-    if n_samples < 2:
-        raise SpaceIdInputError(f"{source}: a log needs at least 2 samples, got {n_samples}")
+    if n_samples < 1:
+        raise SpaceIdInputError(f"{source}: a log needs at least 1 sample, got none")
     if q.ndim != 2 or q.shape[0] != n_samples or q.shape[1] < 1:
         raise SpaceIdInputError(f"{source}: q_rad must have shape (T, n) = ({n_samples}, n) with n >= 1, got shape {q.shape}")
     n = q.shape[1]
@@ -137,7 +137,7 @@ class MeasurementLog:
     finite values, strictly increasing time), raising :class:`SpaceIdInputError` otherwise.
 
     Attributes:
-        t_s: time, shape (T,), s, strictly increasing, T >= 2.
+        t_s: time, shape (T,), s, strictly increasing, T >= 1.
         q_rad: joint angles, shape (T, n), rad.
         dq_rad_s: joint rates, shape (T, n), rad/s.
         omega_base_body_rad_s: base angular velocity in the base body frame, shape (T, 3), rad/s.
@@ -182,7 +182,9 @@ class MeasurementLog:
 
     @property
     def sample_period_s(self) -> float:
-        """Median time step, s."""
+        """Median time step, s (needs at least 2 samples)."""
+        if self.n_samples < 2:
+            raise SpaceIdInputError(f"{self!r}: the sample period needs at least 2 samples")
         return float(np.median(np.diff(self.t_s)))
 
     def __len__(self) -> int:
@@ -288,8 +290,8 @@ class MeasurementLog:
             raise SpaceIdInputError(f"{path} has {n} joints (q1..q{n}), the robot has {n_joints}")
 
         data_rows, data_lines = rows[1:], line_numbers[1:]
-        if len(data_rows) < 2:
-            raise SpaceIdInputError(f"{path}: {len(data_rows)} data rows after the header; a log needs at least 2")
+        if not data_rows:
+            raise SpaceIdInputError(f"{path}: no data rows after the header; a log needs at least 1")
 
         def row_label(i: int) -> str:
             return f"data row {i + 1} (file line {data_lines[i]})"

@@ -108,8 +108,11 @@ def test_constructor_validates() -> None:
         MeasurementLog([0.0, 1.0, 2.0], q, z((3, 2)), z((3, 3)))
     with pytest.raises(SpaceIdInputError, match=r"'t' must be strictly increasing, but sample index 2"):
         MeasurementLog([0.0, 1.0, 1.0], z((3, 2)), z((3, 2)), z((3, 3)))
-    with pytest.raises(SpaceIdInputError, match="at least 2 samples"):
-        MeasurementLog([0.0], z((1, 2)), z((1, 2)), z((1, 3)))
+    with pytest.raises(SpaceIdInputError, match="at least 1 sample"):
+        MeasurementLog(np.zeros(0), z((0, 2)), z((0, 2)), z((0, 3)))
+    single = MeasurementLog([0.0], z((1, 2)), z((1, 2)), z((1, 3)))
+    with pytest.raises(SpaceIdInputError, match="sample period needs at least 2 samples"):
+        _ = single.sample_period_s
 
 
 # ---------------------------------------------------------------------- CSV round trip
@@ -156,9 +159,11 @@ def test_missing_header(tmp_path: Path) -> None:
 
 
 def test_header_only(tmp_path: Path) -> None:
-    path = write(tmp_path, HEADER + "\n" + ROW1 + "\n")
-    with raises_naming(path, "1 data rows after the header"):
+    path = write(tmp_path, HEADER + "\n")
+    with raises_naming(path, "no data rows after the header"):
         MeasurementLog.from_csv(path)
+    path = write(tmp_path, HEADER + "\n" + ROW1 + "\n")
+    assert MeasurementLog.from_csv(path).n_samples == 1
 
 
 @pytest.mark.parametrize(

@@ -11,11 +11,10 @@ from gymnasium import spaces
 from numpy.typing import NDArray
 
 from spaceid_gym.errors import SpaceIdInputError
-from spaceid_gym.information import information_gain_nats
 from spaceid_gym.log import MeasurementLog
 from spaceid_gym.physics.fuel import base_after_fuel, base_params10_fuel_jacobian, check_fuel
 from spaceid_gym.physics.inertia import RigidBodyInertia
-from spaceid_gym.physics.momentum import twist_parameter_jacobian
+from spaceid_gym.physics.momentum import base_parameter_directions, twist_parameter_jacobian
 from spaceid_gym.robots import Robot, load_robot
 from spaceid_gym.sim.mission import FuelSchedule
 from spaceid_gym.sim.recorder import LogRecorder
@@ -59,7 +58,8 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     Values outside [-1, 1] are clipped; NaN or infinite values raise ``ValueError``.
 
     ## Observation Space
-    ``Box(-inf, inf, (2n + 7,), float32)``, all *measured* (noisy) values:
+    ``Box(low, high, (2n + 7,), float32)``, all *measured* (noisy) values; bounds: joint limits
+    +-0.5 rad, +-2x the rate limits, +-pi rad/s, +-1:
 
     | index            | observation                                   | unit  |
     |------------------|-----------------------------------------------|-------|
@@ -133,7 +133,10 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         self.render_mode = render_mode
         n = self.robot.n_joints
         self.action_space = spaces.Box(-1.0, 1.0, shape=(n,), dtype=np.float32)
-        self.observation_space = spaces.Box(-np.inf, np.inf, shape=(2 * n + 7,), dtype=np.float32)
+        rate = self.robot.rate_limit_rad_s
+        high = np.concatenate((self.robot.q_upper_rad + 0.5, 2.0 * rate, [np.pi] * 3, [1.0] * 4))
+        low = np.concatenate((self.robot.q_lower_rad - 0.5, -2.0 * rate, [-np.pi] * 3, [-1.0] * 4))
+        self.observation_space = spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
         # prior ranges: they scale the fuel parameters so that the Fisher information is unit-free
         self._param_scale = np.array(
             [self.fuel_schedule.usable_fraction * base_full.mass_kg] + [self.fuel_schedule.tank_half_width_m(base_full)] * 3
@@ -179,15 +182,17 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         assert self._tank is not None
         base = base_after_fuel(base_full, self._fuel_consumed_kg, self._tank)
         self._theta = np.concatenate(([self._fuel_consumed_kg], self._tank))
-        self._dparams = base_params10_fuel_jacobian(base_full.com_m, self._theta) * self._param_scale
+        self._directions = base_parameter_directions(
+            base_params10_fuel_jacobian(base_full.com_m, self._theta) * self._param_scale
+        )
         self.simulator = FreeFloatingSimulator(self.robot, base)
         q0 = self.robot.home_configuration() + self.np_random.uniform(-0.3, 0.3, size=self.robot.n_joints)
         state = self.simulator.reset(q0_rad=np.clip(q0, self.robot.q_lower_rad, self.robot.q_upper_rad))
         self._recorder = LogRecorder(self.sensors, self.control_period_s, self.np_random)
-        self._fisher = np.eye(4)
+        self._fisher, self._log_det_fisher = np.eye(4), 0.0
         self._fisher_update(state.composite_inertia, state.v_base_body)
         self._truth = _truth_info(self._fuel_consumed_kg, self._tank, base, self._episode)
-        return self._observation(self._recorder.record(state)), {"truth": self._truth}
+        return self._observation(self._recorder.record(state)), {"truth": dict(self._truth)}
 
     def step(self, action: NDArray[np.float32]) -> tuple[NDArray[np.float32], float, bool, bool, dict[str, Any]]:
         a = np.asarray(action, dtype=float)
@@ -207,7 +212,7 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             weights.attitude_per_s * self.control_period_s * float(omega @ omega) / weights.attitude_rate_ref_rad_s**2
         )
         info = {
-            "truth": self._truth,
+            "truth": dict(self._truth),
             "information_gain": gain,
             "penalty_joint_limit": penalty_limit,
             "penalty_attitude": penalty_attitude,
@@ -232,17 +237,33 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         """The measurements of the current episode so far (one sample per control period)."""
         return self._recorder.log()
 
+    def truth(self) -> dict[str, Any]:
+        """The current episode's true parameters (the same as ``info["truth"]``)."""
+        return dict(self._truth)
+
     @property
     def fisher_information(self) -> FloatArray:
-        """Accumulated Fisher information about ``theta`` scaled by the prior ranges, (4, 4)."""
+        """Accumulated Fisher information about ``theta`` scaled by the prior ranges, prior included, (4, 4)."""
         return self._fisher.copy()
+
+    def cramer_rao_std(self) -> FloatArray:
+        """Cramér-Rao bound of the episode's gyro data on ``(mdf [kg], bf [m] x3)``, shape (4,).
+
+        From the data alone (the prior taken out); ``inf`` where the data hold no information.
+        """
+        data_information = (self._fisher - np.eye(4)) / np.outer(self._param_scale, self._param_scale)
+        try:
+            return np.sqrt(np.diag(np.linalg.inv(data_information)))
+        except np.linalg.LinAlgError:
+            return np.full(4, np.inf)
 
     # ------------------------------------------------------------------ internals
     def _fisher_update(self, composite: Any, twist: FloatArray) -> float:
-        jac = twist_parameter_jacobian(composite, twist, self._dparams)[3:]  # d omega / d theta_scaled
-        before = self._fisher
-        self._fisher = before + (jac.T @ jac) / self._gyro_std_for_information**2
-        return information_gain_nats(before, self._fisher)
+        """Add one gyro sample's information; return the gain ``0.5 (log det F_t - log det F_{t-1})``."""
+        jac = twist_parameter_jacobian(composite, twist, self._directions)[3:]  # d omega / d theta_scaled
+        self._fisher = self._fisher + (jac.T @ jac) / self._gyro_std_for_information**2
+        before, self._log_det_fisher = self._log_det_fisher, float(np.linalg.slogdet(self._fisher)[1])
+        return 0.5 * (self._log_det_fisher - before)
 
     def _observation(self, sample: Measurement) -> NDArray[np.float32]:
         return np.concatenate(
@@ -261,11 +282,12 @@ def _sensor_model(sensors: SensorModel | str | None) -> SensorModel:
 
 
 def _truth_info(fuel_consumed_kg: float, tank_m: FloatArray, base: RigidBodyInertia, episode: int) -> dict[str, Any]:
+    """The true parameters as immutable values (tuples), so infos can share them safely."""
     return {
-        "fuel_consumed_kg": fuel_consumed_kg,
-        "tank_position_m": tank_m.tolist(),
-        "base_mass_kg": base.mass_kg,
-        "base_com_m": np.asarray(base.com_m).tolist(),
-        "base_inertia_kgm2": np.asarray(base.inertia_com_kgm2).tolist(),
+        "fuel_consumed_kg": float(fuel_consumed_kg),
+        "tank_position_m": tuple(tank_m.tolist()),
+        "base_mass_kg": float(base.mass_kg),
+        "base_com_m": tuple(np.asarray(base.com_m).tolist()),
+        "base_inertia_kgm2": tuple(tuple(row) for row in np.asarray(base.inertia_com_kgm2).tolist()),
         "episode": episode,
     }

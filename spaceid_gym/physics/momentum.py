@@ -14,8 +14,6 @@ which for ``h_world = 0`` is the paper's eq. 8 (generalized Jacobian) extended t
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-
 import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
@@ -37,37 +35,51 @@ def momentum_base_to_world(h_base: FloatArray, rot_wb: FloatArray, p_wb_m: Float
     return np.concatenate((lin_w, rot_wb @ h_base[3:] + np.cross(p_wb_m, lin_w)))
 
 
-def twist_from_momentum(composite: pin.Inertia, momentum: Sequence[float]) -> FloatArray:
+def twist_from_momentum(composite: pin.Inertia, momentum: FloatArray) -> FloatArray:
     """Twist ``[v; omega]`` (frame origin, frame axes) of a body carrying ``momentum = [P; L]``.
 
-    Closed-form inverse of the spatial inertia ``(m, c, Ic)`` (``composite``, e.g. the whole
-    robot's composite inertia in the base frame, pinocchio ``data.Ycrb[1]``):
-    ``P = m (v + omega x c)`` and ``L = Ic omega + c x P`` give ``omega = Ic^{-1} (L - c x P)`` and
-    ``v = P / m - omega x c``. Written on floats: it sits in the simulator's inner loop.
+    ``composite`` is a spatial inertia, e.g. the whole robot's composite inertia in the base frame
+    (pinocchio ``data.Ycrb[1]``); pinocchio inverts it in closed form. ``momentum`` has shape
+    (6,) or (k, 6); the result has the same shape.
     """
-    m = composite.mass
-    cx, cy, cz = (float(x) for x in composite.lever)
-    (a, b, c), (_, d, e), (_, _, f) = composite.inertia.tolist()  # symmetric [[a b c] [b d e] [c e f]]
-    px, py, pz, lx, ly, lz = (float(x) for x in momentum)
-    # r = L - c x P
-    rx, ry, rz = lx - (cy * pz - cz * py), ly - (cz * px - cx * pz), lz - (cx * py - cy * px)
-    # omega = Ic^{-1} r by cofactors
-    c00, c01, c02 = d * f - e * e, c * e - b * f, b * e - c * d
-    c11, c12, c22 = a * f - c * c, b * c - a * e, a * d - b * b
-    inv_det = 1.0 / (a * c00 + b * c01 + c * c02)
-    wx = (c00 * rx + c01 * ry + c02 * rz) * inv_det
-    wy = (c01 * rx + c11 * ry + c12 * rz) * inv_det
-    wz = (c02 * rx + c12 * ry + c22 * rz) * inv_det
-    return np.array([px / m - (wy * cz - wz * cy), py / m - (wz * cx - wx * cz), pz / m - (wx * cy - wy * cx), wx, wy, wz])
+    return np.asarray(momentum) @ composite.inverse().T
 
 
-def twist_parameter_jacobian(composite: pin.Inertia, twist: FloatArray, dparams10: FloatArray) -> FloatArray:
-    """``d v_base / d theta`` (6, k) given ``d(base params10)/d theta`` (10, k), at fixed momentum.
+def base_parameter_directions(dparams10: FloatArray) -> FloatArray:
+    """``sum_j dparams10[j, k] B_j`` for each column k: (k, 6, 6), ``B_j`` the spatial-inertia basis."""
+    return np.einsum("jk,jab->kab", dparams10, SPATIAL_INERTIA_BASIS)
+
+
+def twist_parameter_jacobian(composite: pin.Inertia, twist: FloatArray, directions: FloatArray) -> FloatArray:
+    """``d v_base / d theta`` (6, k) at fixed momentum.
 
     From ``H_bb v = h_base - H_bm dq`` where only the base's own spatial inertia depends on the
-    parameters: ``dv/dpi_j = -H_bb^{-1} B_j v`` with ``B_j`` the spatial-inertia basis
-    (:data:`SPATIAL_INERTIA_BASIS`) and ``H_bb`` the composite inertia ``composite``.
+    parameters: ``dv/dtheta_k = -H_bb^{-1} D_k v`` with ``D_k = dH_bb/dtheta_k`` from
+    :func:`base_parameter_directions` (``d(base params10)/d theta`` through the spatial-inertia basis)
+    and ``H_bb`` the composite inertia ``composite``.
     """
-    b_v = SPATIAL_INERTIA_BASIS @ twist  # (10, 6): B_j v
-    rhs = -(dparams10.T @ b_v)  # (k, 6)
-    return np.stack([twist_from_momentum(composite, r) for r in rhs], axis=1)
+    return -composite.inverse() @ (directions @ twist).T
+
+
+def base_rate_from_joint_motion(model: pin.Model, q_rad: FloatArray, dq_rad_s: FloatArray) -> FloatArray:
+    """The paper's eq. 8 over a log: base angular velocity (base body frame) from joint motion alone.
+
+    Zero system momentum: ``A_G(q) [v_base; dq] = 0`` with pinocchio's centroidal momentum map
+    ``A_G`` (a code path independent of the simulator's composite-inertia one), solved for the base
+    twist at identity base attitude, so the result is in base axes.
+
+    Args:
+        model: free-flyer pinocchio model with the base mass properties to test.
+        q_rad, dq_rad_s: joint angles and rates, shape (T, n).
+
+    Returns:
+        ``omega_base_body``, shape (T, 3), rad/s.
+    """
+    data = model.createData()
+    q_full = pin.neutral(model)
+    out = np.empty((len(q_rad), 3))
+    for i, (q, dq) in enumerate(zip(q_rad, dq_rad_s, strict=True)):
+        q_full[7:] = q
+        ag = pin.computeCentroidalMap(model, data, q_full)
+        out[i] = np.linalg.solve(ag[:, :6], -ag[:, 6:] @ dq)[3:]
+    return out

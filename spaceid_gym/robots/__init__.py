@@ -6,6 +6,6 @@ user's. The URDF's root link is the satellite base; its ``<inertial>`` is the ba
 
 from __future__ import annotations
 
-from spaceid_gym.robots.robot import Robot, available_robots, load_robot
+from spaceid_gym.robots.robot import Robot, available_robots, load_robot, robot_from_urdf_text
 
-__all__ = ["Robot", "available_robots", "load_robot"]
+__all__ = ["Robot", "available_robots", "load_robot", "robot_from_urdf_text"]

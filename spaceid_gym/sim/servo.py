@@ -51,21 +51,33 @@ class RateServo:
         limit is commanded back. Commands held for long periods can still overshoot slightly
         (about 1e-7 rad at 0.2 s, 4e-4 rad at 1 s; none at the default 0.02 s).
         """
-        u = np.clip(u_rad_s, -self.rate_limit_rad_s, self.rate_limit_rad_s)
-        a = 0.5 * self.accel_limit_rad_s2
-        hold = period_s + 4.0 / self.gain_per_s
+        limited = []
+        # a plain loop: n is small and numpy's per-call overhead would dominate the env step
+        for u, q, lo, hi, rate, acc, k in zip(
+            u_rad_s.tolist(),
+            q_rad.tolist(),
+            q_lower.tolist(),
+            q_upper.tolist(),
+            self.rate_limit_rad_s.tolist(),
+            self.accel_limit_rad_s2.tolist(),
+            self.gain_per_s.tolist(),
+            strict=True,
+        ):
+            a = 0.5 * acc
+            hold = period_s + 4.0 / k
+            up = -rate if q > hi else a * (math.sqrt(hold * hold + 2.0 * max(hi - q, 0.0) / a) - hold)
+            down = -rate if q < lo else a * (math.sqrt(hold * hold + 2.0 * max(q - lo, 0.0) / a) - hold)
+            limited.append(min(max(u, -rate, -down), rate, up))
+        return np.array(limited)
 
-        def cap(distance: FloatArray) -> FloatArray:
-            return a * (np.sqrt(hold * hold + 2.0 * np.maximum(distance, 0.0) / a) - hold)
-
-        up = np.where(q_rad > q_upper, -self.rate_limit_rad_s, cap(q_upper - q_rad))
-        down = np.where(q_rad < q_lower, -self.rate_limit_rad_s, cap(q_rad - q_lower))
-        return np.clip(u, -down, up)
-
-    def switch_times(self, dq0: FloatArray, u: FloatArray) -> FloatArray:
+    def switch_times(self, dq0: FloatArray, u: FloatArray) -> list[float]:
         """Time (s) at which each joint leaves acceleration saturation; 0 if it is not saturated."""
-        a, k = self.accel_limit_rad_s2, self.gain_per_s
-        return np.maximum((np.abs(u - dq0) - a / k) / a, 0.0)
+        return [
+            max((abs(uj - dj) - a / k) / a, 0.0)
+            for uj, dj, a, k in zip(
+                u.tolist(), dq0.tolist(), self.accel_limit_rad_s2.tolist(), self.gain_per_s.tolist(), strict=True
+            )
+        ]
 
     def motion(
         self, q0: FloatArray, dq0: FloatArray, u: FloatArray, t_s: FloatArray

@@ -156,7 +156,7 @@ class FreeFloatingSimulator:
         u = servo.limit_command(rate_command_rad_s, s.q_rad, self.robot.q_lower_rad, self.robot.q_upper_rad, dt_s)
         cuts = [0.0, dt_s]
         if self.split_at_switches:
-            switches = servo.switch_times(s.dq_rad_s, u).tolist()
+            switches = servo.switch_times(s.dq_rad_s, u)
             cuts = sorted({0.0, dt_s, *(t for t in switches if 0.0 < t < dt_s)})
         if self.substeps > 1:
             cuts = sorted({float(t) for a, b in itertools.pairwise(cuts) for t in np.linspace(a, b, self.substeps + 1)})
@@ -200,6 +200,8 @@ class FreeFloatingSimulator:
 
     def _com_world(self, t_s: float) -> FloatArray:
         """System CoM in the inertial frame: it moves uniformly with the linear momentum."""
+        if not self.momentum_world.any():
+            return self._com0_world
         return self._com0_world + self.momentum_world[:3] * (t_s / self.total_mass_kg)
 
 

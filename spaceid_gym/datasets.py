@@ -1,0 +1,66 @@
+"""Simulated datasets: run the environment with an excitation and write a dataset folder.
+
+A dataset folder holds ``log.csv`` (the measurements), ``robot.urdf`` (the robot as given to the
+estimators: full-tank base) and, for simulated data, ``truth.json`` (the true fuel state and base
+mass properties, noise settings and seed). See :mod:`spaceid_gym.log`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from spaceid_gym.envs.free_floating import FreeFloatingIDEnv
+from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.log import Dataset, load_dataset, write_dataset
+from spaceid_gym.robots import Robot
+from spaceid_gym.sim.sensors import SensorModel
+
+#: an excitation: time (s) -> normalised joint-rate command (n,) in [-1, 1]
+Excitation = Callable[[float], NDArray[np.float32]]
+
+
+def simulate_episode(
+    robot: Robot,
+    duration_s: float,
+    fuel_consumed_kg: float,
+    tank_position_m: NDArray[np.float64],
+    excitation: Excitation,
+    seed: int,
+    sensors: SensorModel | None = None,
+    control_period_s: float = 0.02,
+) -> FreeFloatingIDEnv:
+    """Run one identification window in :class:`FreeFloatingIDEnv` and return the env after it.
+
+    The env's :meth:`~FreeFloatingIDEnv.measurement_log` and ``fisher_information`` then describe
+    the window. All noise comes from the env's generator seeded with ``seed``.
+    """
+    if not (np.isfinite(duration_s) and duration_s > 0.0):
+        raise SpaceIdInputError(f"duration: expected a positive number of seconds, got {duration_s!r}")
+    env = FreeFloatingIDEnv(robot, control_period_s=control_period_s, sensors=sensors, tank_position_m=tank_position_m)
+    env.reset(seed=seed, options={"fuel_consumed_kg": fuel_consumed_kg})
+    for k in range(round(duration_s / control_period_s)):
+        env.step(excitation(k * control_period_s))
+    return env
+
+
+def write_episode_dataset(out_dir: str | Path, env: FreeFloatingIDEnv, extra_truth: dict[str, Any] | None = None) -> Dataset:
+    """Write the env's current window as a dataset folder ``out_dir``; return it as loaded back.
+
+    ``truth.json`` holds the episode's true parameters, the noise settings and ``extra_truth``
+    (e.g. the seed and the excitation used).
+    """
+    truth: dict[str, Any] = env.truth()
+    truth.update(
+        robot=env.robot.name,
+        duration_s=env.measurement_log().duration_s,
+        control_period_s=env.control_period_s,
+        noise=env.sensors.as_dict(env.control_period_s),
+        **(extra_truth or {}),
+    )
+    write_dataset(out_dir, env.measurement_log(), env.robot.urdf_text, truth)
+    return load_dataset(out_dir, n_joints=env.robot.n_joints)
