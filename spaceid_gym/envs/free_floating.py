@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -143,7 +144,7 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         )
         mid = 0.5 * (self.robot.q_lower_rad + self.robot.q_upper_rad)
         half = 0.5 * (self.robot.q_upper_rad - self.robot.q_lower_rad)
-        self._joint_mid, self._joint_half = mid, half
+        self._joint_mid, self._inv_tenth_half = mid, 10.0 / half  # excess = (|q - mid| / half - 0.9) / 0.1
         self._gyro_std_for_information = (
             self.sensors.gyro_std_rad_s(self.control_period_s)
             if self.sensors.gyro_arw_rad_sqrt_s > 0.0
@@ -198,14 +199,14 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         a = np.asarray(action, dtype=float)
         if a.shape != self.action_space.shape:
             raise ValueError(f"action: expected shape {self.action_space.shape}, got {a.shape}")
-        if not np.all(np.isfinite(a)):
+        if not math.isfinite(a.sum()):  # NaN and +-inf propagate through the sum
             raise ValueError(f"action: expected finite values in [-1, 1], got {a.tolist()}")
-        rates = np.clip(a, -1.0, 1.0) * self.robot.rate_limit_rad_s
-        state = self.simulator.step(rates, self.control_period_s)
+        # actions beyond [-1, 1] are clipped by the servo's rate limit
+        state = self.simulator.step(a * self.robot.rate_limit_rad_s, self.control_period_s)
         sample = self._recorder.record(state)
         gain = self._fisher_update(state.composite_inertia, state.v_base_body)
         weights = self.reward_weights
-        excess = np.maximum(0.0, (np.abs(state.q_rad - self._joint_mid) / self._joint_half - 0.9) / 0.1)
+        excess = np.maximum(np.abs(state.q_rad - self._joint_mid) * self._inv_tenth_half - 9.0, 0.0)
         penalty_limit = weights.joint_limit * float(excess @ excess)
         omega = state.v_base_body[3:]
         penalty_attitude = (

@@ -83,6 +83,29 @@ def quat_from_matrix(rot: FloatArray) -> FloatArray:
     return q if q[0] >= 0.0 else -q
 
 
+def quat_from_rotation_vector(theta: FloatArray) -> FloatArray:
+    """Unit quaternion ``[w, x, y, z]`` of the rotation ``exp([theta]x)``."""
+    x, y, z = (float(v) for v in theta)
+    angle = math.sqrt(x * x + y * y + z * z)
+    half = 0.5 * angle
+    s = 0.5 - angle * angle / 48.0 if angle < 1e-6 else math.sin(half) / angle
+    return np.array([math.cos(half), s * x, s * y, s * z])
+
+
+def quat_multiply(a: FloatArray, b: FloatArray) -> FloatArray:
+    """Hamilton product ``a b`` of quaternions ``[w, x, y, z]`` (rotation ``a`` after ``b`` in the body)."""
+    aw, ax, ay, az = a.tolist()
+    bw, bx, by, bz = b.tolist()
+    return np.array(
+        [
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ]
+    )
+
+
 def matrix_from_quat(quat_wxyz: FloatArray) -> FloatArray:
     """Rotation matrix of a quaternion ``[w, x, y, z]`` (normalised first)."""
     w, x, y, z = np.asarray(quat_wxyz, dtype=float) / np.linalg.norm(quat_wxyz)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from spaceid_gym.log import MeasurementLog
@@ -22,12 +24,15 @@ class LogRecorder:
         self.sensors = sensors
         self.sample_period_s = sample_period_s
         self.rng = rng
+        self._sample: Callable[[FreeFloatingState, np.random.Generator], Measurement] | None = None
         self._t: list[float] = []
         self._samples: list[Measurement] = []
 
     def record(self, state: FreeFloatingState) -> Measurement:
         """Measure ``state``, keep the sample and return it."""
-        sample = self.sensors.measure(state, self.sample_period_s, self.rng)
+        if self._sample is None:
+            self._sample = self.sensors.sampler(state.q_rad.shape[0], self.sample_period_s)
+        sample = self._sample(state, self.rng)
         self._t.append(state.t_s)
         self._samples.append(sample)
         return sample

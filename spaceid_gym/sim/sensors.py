@@ -20,13 +20,14 @@ gives exact measurements.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
 from spaceid_gym.errors import SpaceIdInputError
-from spaceid_gym.sim.lie import quat_from_matrix, so3_exp
+from spaceid_gym.sim.lie import quat_from_rotation_vector, quat_multiply
 from spaceid_gym.sim.simulator import FreeFloatingState
 
 FloatArray = NDArray[np.float64]
@@ -92,19 +93,30 @@ class SensorModel:
             "sample_period_s": dt_s,
         }
 
-    def measure(self, state: FreeFloatingState, dt_s: float, rng: np.random.Generator) -> Measurement:
-        """One noisy sample of the state, drawing from ``rng`` in a fixed order."""
-        n = state.q_rad.shape[0]
-        noise = rng.standard_normal(2 * n + 6)
-        q = state.q_rad + self.joint_angle_noise_rad * noise[:n]
-        dq = state.dq_rad_s + self.joint_rate_std_rad_s(dt_s) * noise[n : 2 * n]
-        omega = state.omega_base_body + np.asarray(self.gyro_bias_rad_s) + self.gyro_std_rad_s(dt_s) * noise[2 * n : 2 * n + 3]
-        rot = (
-            state.rot_wb
-            if self.attitude_noise_rad == 0.0
-            else state.rot_wb @ so3_exp(self.attitude_noise_rad * noise[2 * n + 3 :])
+    def sampler(self, n_joints: int, dt_s: float) -> Callable[[FreeFloatingState, np.random.Generator], Measurement]:
+        """A function that measures a state at sample period ``dt_s``, drawing from the given generator.
+
+        Each sample draws ``2 n + 6`` standard normals in a fixed order (encoders, joint rates, gyro,
+        star tracker), so a seeded generator reproduces the same noise.
+        """
+        n = n_joints
+        scale = np.concatenate(
+            (
+                np.full(n, self.joint_angle_noise_rad),
+                np.full(n, self.joint_rate_std_rad_s(dt_s)),
+                np.full(3, self.gyro_std_rad_s(dt_s)),
+            )
         )
-        return Measurement(q, dq, omega, quat_from_matrix(rot))
+        bias = np.concatenate((np.zeros(2 * n), np.asarray(self.gyro_bias_rad_s, dtype=float)))
+        attitude_std = self.attitude_noise_rad
+
+        def sample(state: FreeFloatingState, rng: np.random.Generator) -> Measurement:
+            noise = rng.standard_normal(2 * n + 6)
+            y = np.concatenate((state.q_rad, state.dq_rad_s, state.v_base_body[3:])) + bias + scale * noise[: 2 * n + 3]
+            quat = quat_multiply(state.quat_wb, quat_from_rotation_vector(attitude_std * noise[2 * n + 3 :]))
+            return Measurement(y[:n], y[n : 2 * n], y[2 * n :], quat)
+
+        return sample
 
 
 @dataclass(frozen=True)

@@ -15,6 +15,7 @@ everything it integrates is smooth.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -80,19 +81,19 @@ class RateServo:
         ]
 
     def motion(
-        self, q0: FloatArray, dq0: FloatArray, u: FloatArray, t_s: FloatArray
+        self, q0: FloatArray, dq0: FloatArray, u: FloatArray, t_s: Sequence[float] | FloatArray
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Closed-form joint motion under a constant command.
 
         Args:
             q0, dq0: joint angles (rad) and rates (rad/s) at t = 0, shape (n,).
             u: commanded rates (already limited), shape (n,).
-            t_s: times since the command was applied, shape (m,), each >= 0.
+            t_s: times since the command was applied, m values, each >= 0.
 
         Returns:
             ``(q, dq, ddq)``, each shape (m, n).
         """
-        times = [float(t) for t in t_s]
+        times = t_s.tolist() if isinstance(t_s, np.ndarray) else list(t_s)
         q_cols, dq_cols, ddq_cols = [], [], []
         # plain loops over joints and times: n and m are small and numpy's overhead would dominate
         for q0j, dq0j, uj, a, k in zip(

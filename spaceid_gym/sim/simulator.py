@@ -113,6 +113,7 @@ class FreeFloatingSimulator:
         self.split_at_switches = split_at_switches
         self.total_mass_kg = float(sum(inertia.mass for inertia in self.model.inertias))
         self.momentum_world = np.zeros(6)
+        self._zero_momentum = True
         self._com0_world = np.zeros(3)
         self._q_full = pin.neutral(self.model)
         self.state = self.reset()
@@ -136,6 +137,7 @@ class FreeFloatingSimulator:
         q0 = self.robot.home_configuration() if q0_rad is None else np.asarray(q0_rad, dtype=float)
         rot = np.eye(3) if rot_wb is None else np.asarray(rot_wb, dtype=float)
         self.momentum_world = np.zeros(6) if momentum_world is None else np.asarray(momentum_world, dtype=float)
+        self._zero_momentum = not self.momentum_world.any()
         motion = self._base_motion(0.0, q0, np.zeros(n))
         twist, composite = motion(rot)
         p = self._com_world(0.0) - rot @ composite.lever
@@ -160,17 +162,16 @@ class FreeFloatingSimulator:
             cuts = sorted({0.0, dt_s, *(t for t in switches if 0.0 < t < dt_s)})
         if self.substeps > 1:
             cuts = sorted({float(t) for a, b in itertools.pairwise(cuts) for t in np.linspace(a, b, self.substeps + 1)})
-        # joint motion at every interval end and midpoint, in one closed-form evaluation
-        times = np.empty(2 * len(cuts) - 1)
-        times[0::2] = cuts
-        times[1::2] = 0.5 * (times[0:-1:2] + times[2::2])
+        # joint motion at every interval's midpoint and end (t = 0 is the current state)
+        times = [t for a, b in itertools.pairwise(cuts) for t in (0.5 * (a + b), b)]
         q_t, dq_t, ddq_t = servo.motion(s.q_rad, s.dq_rad_s, u, times)
         rot = s.rot_wb
         omega_start = s.v_base_body[3:]
+        attitude_dependent = not self._zero_momentum
         for i in range(len(cuts) - 1):
-            mid = self._base_motion(s.t_s + times[2 * i + 1], q_t[2 * i + 1], dq_t[2 * i + 1])
-            end = self._base_motion(s.t_s + cuts[i + 1], q_t[2 * i + 2], dq_t[2 * i + 2])
-            rot = _rkmk4_attitude(rot, omega_start, cuts[i + 1] - cuts[i], mid, end, self.momentum_world.any())
+            mid = self._base_motion(s.t_s + times[2 * i], q_t[2 * i], dq_t[2 * i])
+            end = self._base_motion(s.t_s + times[2 * i + 1], q_t[2 * i + 1], dq_t[2 * i + 1])
+            rot = _rkmk4_attitude(rot, omega_start, cuts[i + 1] - cuts[i], mid, end, attitude_dependent)
             twist, composite = end(rot)
             omega_start = twist[3:]
         t_end = s.t_s + dt_s
@@ -188,7 +189,7 @@ class FreeFloatingSimulator:
         coupling = pin.crba(self.model, self.data, self._q_full)[:6, 6:]
         composite = self.data.Ycrb[1].copy()  # whole robot's spatial inertia in the base frame
         arm = coupling @ dq_rad_s
-        if not self.momentum_world.any():
+        if self._zero_momentum:
             result = (twist_from_momentum(composite, -arm), composite)
             return lambda rot: result
 
@@ -200,7 +201,7 @@ class FreeFloatingSimulator:
 
     def _com_world(self, t_s: float) -> FloatArray:
         """System CoM in the inertial frame: it moves uniformly with the linear momentum."""
-        if not self.momentum_world.any():
+        if self._zero_momentum:
             return self._com0_world
         return self._com0_world + self.momentum_world[:3] * (t_s / self.total_mass_kg)
 
