@@ -120,6 +120,14 @@ def _check_arrays(
             f"{source}: column '{name}' ({field}) has the non-finite value {float(table[row, col])!r} at "
             f"{row_label(row)}; expected a finite number"
         )
+    if quat is not None:
+        norm_error = np.abs(np.linalg.norm(quat, axis=1) - 1.0)
+        if (norm_error > 1e-6).any():
+            i = int(np.argmax(norm_error > 1e-6))
+            raise SpaceIdInputError(
+                f"{source}: columns 'qw,qx,qy,qz' at {row_label(i)} have norm {float(np.linalg.norm(quat[i]))!r}; "
+                "expected a unit quaternion (within 1e-6)"
+            )
     not_increasing = np.diff(t) <= 0.0
     if not_increasing.any():
         i = int(np.argmax(not_increasing)) + 1
@@ -535,7 +543,8 @@ def load_dataset(directory: PathLike, n_joints: int | None = None) -> Dataset:
 
     Args:
         directory: the folder with ``log.csv``, ``robot.urdf`` and optionally ``truth.json``.
-        n_joints: if given, the log must have this many joints (see :meth:`MeasurementLog.from_csv`).
+        n_joints: the log must have this many joints; default: the joint count of ``robot.urdf``
+            (which is loaded and validated for that).
 
     Raises:
         SpaceIdInputError: if the folder, ``log.csv`` or ``robot.urdf`` is missing, the log is
@@ -551,6 +560,10 @@ def load_dataset(directory: PathLike, n_joints: int | None = None) -> Dataset:
             raise SpaceIdInputError(
                 f"{directory / name}: file not found; a dataset folder needs {LOG_FILENAME} and {URDF_FILENAME}"
             )
+    if n_joints is None:  # the log must fit the robot it comes with
+        from spaceid_gym.robots import load_robot
+
+        n_joints = load_robot(directory / URDF_FILENAME).n_joints
     log = MeasurementLog.from_csv(directory / LOG_FILENAME, n_joints=n_joints)
     truth_path = directory / TRUTH_FILENAME
     truth: dict[str, Any] | None = None

@@ -85,13 +85,30 @@ def test_bad_input_exits_non_zero_without_traceback(tmp_path: Path, args: list[s
     assert not (tmp_path / "x" / "log.csv").exists()
 
 
-def test_bad_urdf_is_reported(tmp_path: Path) -> None:
-    urdf = tmp_path / "bad.urdf"
-    urdf.write_text('<robot name="r"><link name="base"/></robot>')
+_BASE = (
+    '<link name="base"><inertial><mass value="100"/><inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/></inertial></link>'
+)
+_ARM = (
+    '<link name="l1"><inertial><mass value="5"/><inertia ixx="{ixx}" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/></inertial></link>'
+)
+_JOINT = '<joint name="j1" type="{jtype}"><parent link="base"/><child link="l1"/><axis xyz="0 0 1"/><limit lower="-1" upper="1" velocity="0.1" effort="10"/></joint>'
+
+
+@pytest.mark.parametrize(
+    ("urdf", "message"),
+    [
+        ('<robot name="r"><link name="base"/></robot>', "has no <inertial>"),
+        (f'<robot name="r">{_BASE}{_ARM.format(ixx=5)}{_JOINT.format(jtype="revolute")}</robot>', "triangle inequality"),
+        (f'<robot name="r">{_BASE}{_ARM.format(ixx=1)}{_JOINT.format(jtype="prismatic")}</robot>', "type 'prismatic'"),
+    ],
+)
+def test_bad_urdf_is_reported(tmp_path: Path, urdf: str, message: str) -> None:
+    path = tmp_path / "bad.urdf"
+    path.write_text(urdf)
     result = subprocess.run(
-        [sys.executable, "-m", "spaceid_gym.cli", "simulate", "--robot", str(urdf), "--out", str(tmp_path / "x")],
+        [sys.executable, "-m", "spaceid_gym.cli", "simulate", "--robot", str(path), "--out", str(tmp_path / "x")],
         capture_output=True,
         text=True,
         timeout=120,
     )
-    assert result.returncode == 2 and "has no <inertial>" in result.stderr and "Traceback" not in result.stderr
+    assert result.returncode == 2 and message in result.stderr and "Traceback" not in result.stderr

@@ -153,3 +153,26 @@ def test_render_rgb_array() -> None:
     for _ in range(25):
         env.step(np.ones(3, dtype=np.float32))
     assert not np.array_equal(frame, env.render())
+
+
+def test_failed_reset_leaves_the_env_usable() -> None:
+    env = FreeFloatingIDEnv(robot="quick3")
+    _, info = env.reset(seed=1)
+    with pytest.raises(ValueError, match=r"triangle|positive definite"):
+        env.reset(options={"fuel_consumed_kg": 100.0, "tank_position_m": [3.0, 3.0, 3.0]})
+    _, after = env.reset()  # the next window of the same satellite
+    assert after["truth"]["tank_position_m"] == info["truth"]["tank_position_m"]
+    assert after["truth"]["episode"] == 1
+
+
+def test_cramer_rao_bound_is_infinite_without_excitation_and_finite_with_it() -> None:
+    env = FreeFloatingIDEnv(robot="quick3")
+    env.reset(seed=2)
+    env.step(np.zeros(3, dtype=np.float32))
+    assert np.all(np.isinf(env.cramer_rao_std()))  # one sample of a still arm: nothing to learn
+    for k in range(500):
+        env.step(np.sin(0.05 * k + np.arange(3)).astype(np.float32))
+    std = env.cramer_rao_std()
+    assert np.all(np.isfinite(std)) and std[0] < 50.0
+    *_, info = env.step(np.zeros(3, dtype=np.float32))
+    assert info["log_det_fisher"] > 0.0

@@ -13,9 +13,10 @@ import pytest
 import spaceid_gym.log as log_module
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.log import Dataset, MeasurementLog, load_dataset, write_dataset
+from spaceid_gym.robots import load_robot
 
 N_JOINTS = 3
-URDF_TEXT = '<?xml version="1.0"?>\n<robot name="tiny"><link name="base"/></robot>\n'
+URDF_TEXT = load_robot("quick3").urdf_text  # 3 joints, as N_JOINTS
 
 
 def make_log(n_samples: int = 50, n_joints: int = N_JOINTS, with_quat: bool = True, seed: int = 0) -> MeasurementLog:
@@ -350,3 +351,14 @@ def test_load_dataset_errors(tmp_path: Path) -> None:
     (directory / "truth.json").unlink()
     with raises_naming(directory / "log.csv", "has 3 joints"):
         load_dataset(directory, n_joints=6)
+    (directory / "robot.urdf").write_text(load_robot("paper6").urdf_text)
+    with raises_naming(directory / "log.csv", "has 3 joints .* the robot has 6"):
+        load_dataset(directory)  # the joint count comes from robot.urdf
+
+
+def test_quaternion_must_be_unit() -> None:
+    log = make_log(n_samples=4)
+    quat = np.array(log.quat_base_to_inertial_wxyz)
+    quat[2] *= 2.0
+    with pytest.raises(SpaceIdInputError, match=r"'qw,qx,qy,qz' at sample index 2 .*have norm 2.0; expected a unit quaternion"):
+        MeasurementLog(log.t_s, log.q_rad, log.dq_rad_s, log.omega_base_body_rad_s, quat)

@@ -10,20 +10,10 @@ from spaceid_gym.physics.momentum import (
     base_parameter_directions,
     momentum_base_to_world,
     momentum_world_to_base,
-    twist_from_momentum,
     twist_parameter_jacobian,
 )
 from spaceid_gym.robots import Robot
 from spaceid_gym.sim.simulator import FreeFloatingSimulator
-
-
-def test_twist_from_momentum_inverts_the_spatial_inertia() -> None:
-    rng = np.random.default_rng(0)
-    for _ in range(10):
-        inertia = pin.Inertia.Random()
-        twist = rng.normal(size=6)
-        momentum = inertia.matrix() @ twist
-        np.testing.assert_allclose(twist_from_momentum(inertia, momentum), twist, rtol=1e-10, atol=1e-10)
 
 
 def test_momentum_frame_change_matches_pinocchio_action() -> None:
@@ -51,7 +41,7 @@ def test_base_rate_sensitivity_to_fuel_matches_finite_differences(paper6: Robot)
     sim._q_full[7:] = q
     pin.crba(sim.model, sim.data, sim._q_full)
     directions = base_parameter_directions(base_params10_fuel_jacobian(paper6.base_full.com_m, theta))
-    jac = twist_parameter_jacobian(sim.data.Ycrb[1], v, directions)
+    jac = twist_parameter_jacobian(sim.data.Ycrb[1].inverse(), v, directions)
     for k, step in enumerate([1e-3, 1e-5, 1e-5, 1e-5]):
         e = np.zeros(4)
         e[k] = step

@@ -76,6 +76,10 @@ def _urdf(base: str | None = None, link: str | None = None, joint: str | None = 
         (_urdf(joint=_JOINT.format(jtype="continuous", limit="")), "type 'continuous'; supported"),
         (_urdf(joint=_JOINT.format(jtype="revolute", limit="")), "needs <limit>"),
         ("<robot><link", "not valid URDF XML"),
+        (
+            _urdf(joint=_JOINT.format(jtype="revolute", limit=_LIMIT).replace('xyz="0 0 1"', 'xyz="0 0 0"')),
+            "expected a non-zero 3-vector",
+        ),
         ("<model/>", "expected <robot>"),
     ],
 )

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 import pinocchio as pin
+from numba import njit
 from numpy.typing import NDArray
 
 from spaceid_gym.physics.inertia import SPATIAL_INERTIA_BASIS
@@ -23,10 +24,17 @@ from spaceid_gym.physics.inertia import SPATIAL_INERTIA_BASIS
 FloatArray = NDArray[np.float64]
 
 
+@njit(cache=True)
 def momentum_world_to_base(h_world: FloatArray, rot_wb: FloatArray, p_wb_m: FloatArray) -> FloatArray:
-    """Express momentum ``[P; L_O]`` (inertial origin, inertial axes) about the base origin in base axes."""
+    """Express momentum ``[P; L_O]`` (inertial origin, inertial axes) about the base origin in base axes.
+
+    Compiled with numba: it runs inside the simulator's integration kernel.
+    """
     lin_w, ang_w = h_world[:3], h_world[3:]
-    return np.concatenate((rot_wb.T @ lin_w, rot_wb.T @ (ang_w - np.cross(p_wb_m, lin_w))))
+    out = np.empty(6)
+    out[:3] = rot_wb.T @ lin_w
+    out[3:] = rot_wb.T @ (ang_w - np.cross(p_wb_m, lin_w))
+    return out
 
 
 def momentum_base_to_world(h_base: FloatArray, rot_wb: FloatArray, p_wb_m: FloatArray) -> FloatArray:
@@ -35,30 +43,25 @@ def momentum_base_to_world(h_base: FloatArray, rot_wb: FloatArray, p_wb_m: Float
     return np.concatenate((lin_w, rot_wb @ h_base[3:] + np.cross(p_wb_m, lin_w)))
 
 
-def twist_from_momentum(composite: pin.Inertia, momentum: FloatArray) -> FloatArray:
-    """Twist ``[v; omega]`` (frame origin, frame axes) of a body carrying ``momentum = [P; L]``.
-
-    ``composite`` is a spatial inertia, e.g. the whole robot's composite inertia in the base frame
-    (pinocchio ``data.Ycrb[1]``); pinocchio inverts it in closed form. ``momentum`` has shape
-    (6,) or (k, 6); the result has the same shape.
-    """
-    return np.asarray(momentum) @ composite.inverse().T
-
-
 def base_parameter_directions(dparams10: FloatArray) -> FloatArray:
     """``sum_j dparams10[j, k] B_j`` for each column k: (k, 6, 6), ``B_j`` the spatial-inertia basis."""
     return np.einsum("jk,jab->kab", dparams10, SPATIAL_INERTIA_BASIS)
 
 
-def twist_parameter_jacobian(composite: pin.Inertia, twist: FloatArray, directions: FloatArray) -> FloatArray:
+@njit(cache=True)
+def twist_parameter_jacobian(h_bb_inv: FloatArray, twist: FloatArray, directions: FloatArray) -> FloatArray:
     """``d v_base / d theta`` (6, k) at fixed momentum.
 
     From ``H_bb v = h_base - H_bm dq`` where only the base's own spatial inertia depends on the
-    parameters: ``dv/dtheta_k = -H_bb^{-1} D_k v`` with ``D_k = dH_bb/dtheta_k`` from
-    :func:`base_parameter_directions` (``d(base params10)/d theta`` through the spatial-inertia basis)
-    and ``H_bb`` the composite inertia ``composite``.
+    parameters: ``dv/dtheta_k = -H_bb^{-1} D_k v`` with ``D_k = dH_bb/dtheta_k`` (k, 6, 6) from
+    :func:`base_parameter_directions` and ``h_bb_inv`` the inverse of the composite inertia ``H_bb``.
+    Compiled with numba (it runs every env step, for the reward).
     """
-    return -composite.inverse() @ (directions @ twist).T
+    k = directions.shape[0]
+    d_v = np.empty((6, k))
+    for i in range(k):
+        d_v[:, i] = directions[i] @ twist
+    return -(h_bb_inv @ d_v)
 
 
 def base_rate_from_joint_motion(model: pin.Model, q_rad: FloatArray, dq_rad_s: FloatArray) -> FloatArray:

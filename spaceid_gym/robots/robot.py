@@ -160,6 +160,16 @@ def _check_links_and_joints(root: ET.Element, source: str) -> None:
         jtype = joint.get("type")
         if jtype not in _SUPPORTED_JOINTS:
             raise SpaceIdInputError(f"{source}: joint '{joint.get('name')}' has type '{jtype}'; supported: revolute, fixed")
+        axis = joint.find("axis")
+        if jtype == "revolute" and axis is not None:
+            try:
+                values = [float(x) for x in axis.get("xyz", "1 0 0").split()]
+            except ValueError:
+                values = []
+            if len(values) != 3 or not any(values):
+                raise SpaceIdInputError(
+                    f"{source}: joint '{joint.get('name')}' has axis {axis.get('xyz')!r}; expected a non-zero 3-vector"
+                )
         if jtype == "revolute" and joint.find("limit") is None:
             raise SpaceIdInputError(f"{source}: joint '{joint.get('name')}' needs <limit> with lower, upper, velocity and effort")
     for link in root.iter("link"):

@@ -3,9 +3,10 @@
 Default noise levels are those of hardware classes flown on spacecraft and space manipulators:
 
 * **Gyro** (base angular rate, base body frame): a navigation-grade fibre-optic gyro of the
-  LN-200S class, angle random walk 0.07 deg/sqrt(h) = 2.04e-5 rad/sqrt(s). Sampled as the mean
-  rate over a period ``dt`` its white noise has standard deviation ``ARW / sqrt(dt)``
-  (1.44e-4 rad/s at 50 Hz). An optional constant bias (rad/s), default zero.
+  LN-200S class, angle random walk 0.07 deg/sqrt(h) = 2.04e-5 rad/sqrt(s). A rate output
+  averaged over a period ``dt`` carries white noise of standard deviation ``ARW / sqrt(dt)``
+  (1.44e-4 rad/s at 50 Hz); the model adds that noise to the instantaneous rate at the sample
+  time. An optional constant bias (rad/s), default zero.
 * **Joint encoders**: 20-bit absolute encoders on the joint output (resolution 6.0e-6 rad); the
   default white noise 5e-6 rad covers quantisation and electronics.
 * **Joint-rate sensors** (resolver/tachometer rate): white noise density 1.4e-5 rad/s/sqrt(Hz),
@@ -24,10 +25,11 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 from spaceid_gym.errors import SpaceIdInputError
-from spaceid_gym.sim.lie import quat_from_rotation_vector, quat_multiply
+from spaceid_gym.sim.lie import quat_from_matrix, quat_from_rotation_vector, quat_multiply
 from spaceid_gym.sim.simulator import FreeFloatingState
 
 FloatArray = NDArray[np.float64]
@@ -111,12 +113,38 @@ class SensorModel:
         attitude_std = self.attitude_noise_rad
 
         def sample(state: FreeFloatingState, rng: np.random.Generator) -> Measurement:
-            noise = rng.standard_normal(2 * n + 6)
-            y = np.concatenate((state.q_rad, state.dq_rad_s, state.v_base_body[3:])) + bias + scale * noise[: 2 * n + 3]
-            quat = quat_multiply(state.quat_wb, quat_from_rotation_vector(attitude_std * noise[2 * n + 3 :]))
+            y, quat = _noisy(
+                state.q_rad,
+                state.dq_rad_s,
+                state.v_base_body,
+                state.rot_wb,
+                rng.standard_normal(2 * n + 6),
+                scale,
+                bias,
+                attitude_std,
+            )
             return Measurement(y[:n], y[n : 2 * n], y[2 * n :], quat)
 
         return sample
+
+
+@njit(cache=True)
+def _noisy(
+    q: FloatArray,
+    dq: FloatArray,
+    twist: FloatArray,
+    rot_wb: FloatArray,
+    noise: FloatArray,
+    scale: FloatArray,
+    bias: FloatArray,
+    attitude_std: float,
+) -> tuple[FloatArray, FloatArray]:
+    """``[q, dq, omega] + bias + scale * noise`` and the attitude quaternion rotated by star-tracker noise."""
+    n = q.shape[0]
+    y = np.empty(2 * n + 3)
+    y[:n], y[n : 2 * n], y[2 * n :] = q, dq, twist[3:]
+    y += bias + scale * noise[: 2 * n + 3]
+    return y, quat_multiply(quat_from_matrix(rot_wb), quat_from_rotation_vector(attitude_std * noise[2 * n + 3 :]))
 
 
 @dataclass(frozen=True)

@@ -19,6 +19,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 FloatArray = NDArray[np.float64]
@@ -52,33 +53,20 @@ class RateServo:
         limit is commanded back. Commands held for long periods can still overshoot slightly
         (about 1e-7 rad at 0.2 s, 4e-4 rad at 1 s; none at the default 0.02 s).
         """
-        limited = []
-        # a plain loop: n is small and numpy's per-call overhead would dominate the env step
-        for u, q, lo, hi, rate, acc, k in zip(
-            u_rad_s.tolist(),
-            q_rad.tolist(),
-            q_lower.tolist(),
-            q_upper.tolist(),
-            self.rate_limit_rad_s.tolist(),
-            self.accel_limit_rad_s2.tolist(),
-            self.gain_per_s.tolist(),
-            strict=True,
-        ):
-            a = 0.5 * acc
-            hold = period_s + 4.0 / k
-            up = -rate if q > hi else a * (math.sqrt(hold * hold + 2.0 * max(hi - q, 0.0) / a) - hold)
-            down = -rate if q < lo else a * (math.sqrt(hold * hold + 2.0 * max(q - lo, 0.0) / a) - hold)
-            limited.append(min(max(u, -rate, -down), rate, up))
-        return np.array(limited)
+        return _limit_command(
+            np.asarray(u_rad_s, dtype=float),
+            q_rad,
+            q_lower,
+            q_upper,
+            self.rate_limit_rad_s,
+            self.accel_limit_rad_s2,
+            self.gain_per_s,
+            period_s,
+        )
 
-    def switch_times(self, dq0: FloatArray, u: FloatArray) -> list[float]:
+    def switch_times(self, dq0: FloatArray, u: FloatArray) -> FloatArray:
         """Time (s) at which each joint leaves acceleration saturation; 0 if it is not saturated."""
-        return [
-            max((abs(uj - dj) - a / k) / a, 0.0)
-            for uj, dj, a, k in zip(
-                u.tolist(), dq0.tolist(), self.accel_limit_rad_s2.tolist(), self.gain_per_s.tolist(), strict=True
-            )
-        ]
+        return _switch_times(dq0, u, self.accel_limit_rad_s2, self.gain_per_s)
 
     def motion(
         self, q0: FloatArray, dq0: FloatArray, u: FloatArray, t_s: Sequence[float] | FloatArray
@@ -93,29 +81,52 @@ class RateServo:
         Returns:
             ``(q, dq, ddq)``, each shape (m, n).
         """
-        times = t_s.tolist() if isinstance(t_s, np.ndarray) else list(t_s)
-        q_cols, dq_cols, ddq_cols = [], [], []
-        # plain loops over joints and times: n and m are small and numpy's overhead would dominate
-        for q0j, dq0j, uj, a, k in zip(
-            q0.tolist(), dq0.tolist(), u.tolist(), self.accel_limit_rad_s2.tolist(), self.gain_per_s.tolist(), strict=True
-        ):
-            e0 = uj - dq0j
-            t1 = max((abs(e0) - a / k) / a, 0.0)
-            # error at the switch; while saturated k * e1 = +-a_max, so one formula covers both phases
-            e1 = math.copysign(a / k, e0) if t1 > 0.0 else e0
-            k_e1 = k * e1
-            q_col, dq_col, ddq_col = [], [], []
-            for t in times:
-                tc = t if t < t1 else t1  # time spent saturated
-                tau = t - tc  # time spent in the exponential phase
-                decay = math.exp(-k * tau)
-                q_col.append(q0j + (dq0j + 0.5 * k_e1 * tc) * tc + uj * tau - e1 * (1.0 - decay) / k)
-                dq_col.append(dq0j + k_e1 * tc + e1 * (1.0 - decay))
-                ddq_col.append(k_e1 * decay)
-            q_cols.append(q_col)
-            dq_cols.append(dq_col)
-            ddq_cols.append(ddq_col)
-        return np.array(q_cols).T, np.array(dq_cols).T, np.array(ddq_cols).T
+        return _motion(q0, dq0, u, self.accel_limit_rad_s2, self.gain_per_s, np.asarray(t_s, dtype=float))
+
+
+# The servo's arithmetic is compiled with numba: it runs every env step on a handful of joints,
+# where numpy's per-call overhead would dominate.
+
+
+@njit(cache=True)
+def _limit_command(
+    u: FloatArray, q: FloatArray, lo: FloatArray, hi: FloatArray, rate: FloatArray, acc: FloatArray, k: FloatArray, period: float
+) -> FloatArray:
+    out = np.empty_like(u)
+    for j in range(u.shape[0]):
+        a = 0.5 * acc[j]
+        hold = period + 4.0 / k[j]
+        up = -rate[j] if q[j] > hi[j] else a * (math.sqrt(hold * hold + 2.0 * max(hi[j] - q[j], 0.0) / a) - hold)
+        down = -rate[j] if q[j] < lo[j] else a * (math.sqrt(hold * hold + 2.0 * max(q[j] - lo[j], 0.0) / a) - hold)
+        out[j] = min(max(u[j], -rate[j], -down), rate[j], up)
+    return out
+
+
+@njit(cache=True)
+def _switch_times(dq0: FloatArray, u: FloatArray, acc: FloatArray, k: FloatArray) -> FloatArray:
+    return np.maximum((np.abs(u - dq0) - acc / k) / acc, 0.0)
+
+
+@njit(cache=True)
+def _motion(
+    q0: FloatArray, dq0: FloatArray, u: FloatArray, acc: FloatArray, k: FloatArray, times: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    m, n = times.shape[0], q0.shape[0]
+    q, dq, ddq = np.empty((m, n)), np.empty((m, n)), np.empty((m, n))
+    for j in range(n):
+        e0 = u[j] - dq0[j]
+        t1 = max((abs(e0) - acc[j] / k[j]) / acc[j], 0.0)
+        # error at the switch; while saturated k * e1 = +-a_max, so one formula covers both phases
+        e1 = math.copysign(acc[j] / k[j], e0) if t1 > 0.0 else e0
+        k_e1 = k[j] * e1
+        for i in range(m):
+            tc = min(times[i], t1)  # time spent saturated
+            tau = times[i] - tc  # time spent in the exponential phase
+            decay = math.exp(-k[j] * tau)
+            q[i, j] = q0[j] + (dq0[j] + 0.5 * k_e1 * tc) * tc + u[j] * tau - e1 * (1.0 - decay) / k[j]
+            dq[i, j] = dq0[j] + k_e1 * tc + e1 * (1.0 - decay)
+            ddq[i, j] = k_e1 * decay
+    return q, dq, ddq
 
 
 def default_servo(rate_limit_rad_s: FloatArray, ramp_time_s: float = 0.5, gain_per_s: float = 10.0) -> RateServo:

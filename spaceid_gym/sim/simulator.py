@@ -23,17 +23,17 @@ equations (zero base wrench) and check the integrator's order, independently.
 from __future__ import annotations
 
 import itertools
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
+from numba import njit
 from numpy.typing import NDArray
 
 from spaceid_gym.physics.inertia import RigidBodyInertia
-from spaceid_gym.physics.momentum import momentum_world_to_base, twist_from_momentum
+from spaceid_gym.physics.momentum import momentum_world_to_base
 from spaceid_gym.robots.robot import Robot
-from spaceid_gym.sim.lie import Vec3, dexp_inv, quat_from_matrix, so3_exp
+from spaceid_gym.sim.lie import dexp_inv, quat_from_matrix, so3_exp
 from spaceid_gym.sim.servo import RateServo, default_servo
 
 FloatArray = NDArray[np.float64]
@@ -138,15 +138,15 @@ class FreeFloatingSimulator:
         rot = np.eye(3) if rot_wb is None else np.asarray(rot_wb, dtype=float)
         self.momentum_world = np.zeros(6) if momentum_world is None else np.asarray(momentum_world, dtype=float)
         self._zero_momentum = not self.momentum_world.any()
-        motion = self._base_motion(0.0, q0, np.zeros(n))
-        twist, composite = motion(rot)
-        p = self._com_world(0.0) - rot @ composite.lever
-        self.state = FreeFloatingState(0.0, rot, p, q0.copy(), np.zeros(n), np.zeros(n), twist, composite)
+        terms = self._base_terms(0.0, q0, np.zeros(n))
+        twist = base_twist_at_attitude(rot, self.momentum_world, *terms[1:])
+        p = terms[3] - rot @ terms[0].lever
+        self.state = FreeFloatingState(0.0, rot, p, q0.copy(), np.zeros(n), np.zeros(n), twist, terms[0])
         return self.state
 
     def base_twist(self, q_rad: FloatArray, dq_rad_s: FloatArray, rot_wb: FloatArray, t_s: float = 0.0) -> FloatArray:
         """Base twist ``[v_lin; omega]`` (base axes) from momentum conservation, shape (6,)."""
-        return self._base_motion(t_s, q_rad, dq_rad_s)(rot_wb)[0]
+        return base_twist_at_attitude(rot_wb, self.momentum_world, *self._base_terms(t_s, q_rad, dq_rad_s)[1:])
 
     def step(self, rate_command_rad_s: FloatArray, dt_s: float) -> FreeFloatingState:
         """Hold the joint-rate command for ``dt_s`` seconds and advance the state.
@@ -165,39 +165,26 @@ class FreeFloatingSimulator:
         # joint motion at every interval's midpoint and end (t = 0 is the current state)
         times = [t for a, b in itertools.pairwise(cuts) for t in (0.5 * (a + b), b)]
         q_t, dq_t, ddq_t = servo.motion(s.q_rad, s.dq_rad_s, u, times)
-        rot = s.rot_wb
-        omega_start = s.v_base_body[3:]
-        attitude_dependent = not self._zero_momentum
+        rot, twist = s.rot_wb, s.v_base_body
         for i in range(len(cuts) - 1):
-            mid = self._base_motion(s.t_s + times[2 * i], q_t[2 * i], dq_t[2 * i])
-            end = self._base_motion(s.t_s + times[2 * i + 1], q_t[2 * i + 1], dq_t[2 * i + 1])
-            rot = _rkmk4_attitude(rot, omega_start, cuts[i + 1] - cuts[i], mid, end, attitude_dependent)
-            twist, composite = end(rot)
-            omega_start = twist[3:]
-        t_end = s.t_s + dt_s
-        p = self._com_world(t_end) - rot @ composite.lever
-        self.state = FreeFloatingState(t_end, rot, p, q_t[-1], dq_t[-1], ddq_t[-1], twist, composite)
+            mid = self._base_terms(s.t_s + times[2 * i], q_t[2 * i], dq_t[2 * i])
+            end = self._base_terms(s.t_s + times[2 * i + 1], q_t[2 * i + 1], dq_t[2 * i + 1])
+            rot = rkmk4_attitude(rot, twist[3:], cuts[i + 1] - cuts[i], self.momentum_world, *mid[1:], *end[1:])
+            twist = base_twist_at_attitude(rot, self.momentum_world, *end[1:])
+        p = end[3] - rot @ end[0].lever
+        self.state = FreeFloatingState(s.t_s + dt_s, rot, p, q_t[-1], dq_t[-1], ddq_t[-1], twist, end[0])
         return self.state
 
-    def _base_motion(self, t_s: float, q_rad: FloatArray, dq_rad_s: FloatArray) -> BaseMotion:
-        """The base twist and the composite inertia (base frame) at ``(t, q, dq)``, given the attitude.
+    def _base_terms(self, t_s: float, q_rad: FloatArray, dq_rad_s: FloatArray) -> BaseTerms:
+        """What the base twist depends on at ``(t, q, dq)``, apart from the attitude.
 
-        The attitude enters only through the base-frame momentum; with zero momentum the returned
-        function ignores it.
+        Returns ``(composite, H_bb^{-1} (6, 6), H_bm dq (6,), CoM in base frame (3,), CoM in the inertial frame (3,))``,
+        ``composite`` the whole robot's spatial inertia in the base frame (``H_bb``).
         """
         self._q_full[7:] = q_rad
         coupling = pin.crba(self.model, self.data, self._q_full)[:6, 6:]
-        composite = self.data.Ycrb[1].copy()  # whole robot's spatial inertia in the base frame
-        arm = coupling @ dq_rad_s
-        if self._zero_momentum:
-            result = (twist_from_momentum(composite, -arm), composite)
-            return lambda rot: result
-
-        def motion(rot: FloatArray) -> tuple[FloatArray, pin.Inertia]:
-            p = self._com_world(t_s) - rot @ composite.lever
-            return twist_from_momentum(composite, momentum_world_to_base(self.momentum_world, rot, p) - arm), composite
-
-        return motion
+        composite = self.data.Ycrb[1].copy()
+        return composite, composite.inverse(), coupling @ dq_rad_s, composite.lever, self._com_world(t_s)
 
     def _com_world(self, t_s: float) -> FloatArray:
         """System CoM in the inertial frame: it moves uniformly with the linear momentum."""
@@ -206,36 +193,59 @@ class FreeFloatingSimulator:
         return self._com0_world + self.momentum_world[:3] * (t_s / self.total_mass_kg)
 
 
-#: ``rot -> (base twist (6,), composite inertia in the base frame)`` at a fixed time and joint state
-BaseMotion = Callable[[FloatArray], tuple[FloatArray, pin.Inertia]]
+#: ``(composite inertia, its inverse (6, 6), H_bm dq (6,), system CoM in base frame (3,), in inertial frame (3,))``
+BaseTerms = tuple[pin.Inertia, FloatArray, FloatArray, FloatArray, FloatArray]
 
 
-def _rkmk4_attitude(
-    rot0: FloatArray, omega0: FloatArray, h: float, mid: BaseMotion, end: BaseMotion, attitude_dependent: bool
+@njit(cache=True)
+def base_twist_at_attitude(
+    rot_wb: FloatArray,
+    momentum_world: FloatArray,
+    h_bb_inv: FloatArray,
+    arm: FloatArray,
+    com_base_m: FloatArray,
+    com_world_m: FloatArray,
+) -> FloatArray:
+    """Base twist ``[v; omega]`` (base axes) from ``H_bb v = h_base(R, p) - H_bm dq``, shape (6,).
+
+    The base position follows from the system CoM: ``p = c_world - R c_base``.
+    """
+    p = com_world_m - rot_wb @ com_base_m
+    return h_bb_inv @ (momentum_world_to_base(momentum_world, rot_wb, p) - arm)
+
+
+@njit(cache=True)
+def rkmk4_attitude(
+    rot0: FloatArray,
+    omega0: FloatArray,
+    h: float,
+    momentum_world: FloatArray,
+    inv_mid: FloatArray,
+    arm_mid: FloatArray,
+    com_base_mid: FloatArray,
+    com_world_mid: FloatArray,
+    inv_end: FloatArray,
+    arm_end: FloatArray,
+    com_base_end: FloatArray,
+    com_world_end: FloatArray,
 ) -> FloatArray:
     """One RKMK4 step of length ``h`` for the base attitude on SO(3).
 
     ``R = R0 exp([theta]x)`` with ``d theta/dt = dexp^{-1}(theta, omega_base_body)``. The body rate
-    is ``omega0`` at the start; ``mid``/``end`` give the base motion at ``t + h/2``/``t + h`` for an
-    attitude, which matters only when ``attitude_dependent`` (non-zero system momentum).
+    is ``omega0`` at the start; at ``t + h/2`` and ``t + h`` it follows from the base terms there
+    (:data:`BaseTerms`) and the stage attitude. Compiled with numba (it runs every env step).
     """
-    half = 0.5 * h
-
-    def omega(motion: BaseMotion, theta: Vec3) -> Vec3:
-        twist = motion(rot0 @ so3_exp(theta) if attitude_dependent else rot0)[0]
-        return (float(twist[3]), float(twist[4]), float(twist[5]))
-
-    k1 = (float(omega0[0]), float(omega0[1]), float(omega0[2]))
-    th2 = (half * k1[0], half * k1[1], half * k1[2])
-    k2 = dexp_inv(th2, omega(mid, th2))
-    th3 = (half * k2[0], half * k2[1], half * k2[2])
-    k3 = dexp_inv(th3, omega(mid, th3))
-    th4 = (h * k3[0], h * k3[1], h * k3[2])
-    k4 = dexp_inv(th4, omega(end, th4))
-    sixth = h / 6.0
-    theta = (
-        sixth * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0]),
-        sixth * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1]),
-        sixth * (k1[2] + 2.0 * k2[2] + 2.0 * k3[2] + k4[2]),
+    k1 = omega0.copy()
+    th2 = 0.5 * h * k1
+    k2 = dexp_inv(
+        th2, base_twist_at_attitude(rot0 @ so3_exp(th2), momentum_world, inv_mid, arm_mid, com_base_mid, com_world_mid)[3:]
     )
-    return rot0 @ so3_exp(theta)
+    th3 = 0.5 * h * k2
+    k3 = dexp_inv(
+        th3, base_twist_at_attitude(rot0 @ so3_exp(th3), momentum_world, inv_mid, arm_mid, com_base_mid, com_world_mid)[3:]
+    )
+    th4 = h * k3
+    k4 = dexp_inv(
+        th4, base_twist_at_attitude(rot0 @ so3_exp(th4), momentum_world, inv_end, arm_end, com_base_end, com_world_end)[3:]
+    )
+    return rot0 @ so3_exp((h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4))
