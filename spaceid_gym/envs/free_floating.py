@@ -258,8 +258,8 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         From the data alone (the prior taken out); ``inf`` for a parameter in a direction the data
         do not inform (information below 1e-9 of the largest).
         """
-        data_information = (self._fisher - np.eye(4)) / np.outer(self._param_scale, self._param_scale)
-        return cramer_rao_std(data_information)
+        # rank decisions in the prior-scaled units (kg and m are not comparable), then back to SI
+        return cramer_rao_std(self._fisher - np.eye(4)) * self._param_scale
 
     # ------------------------------------------------------------------ internals
     def _fisher_update(self, composite: Any, twist: FloatArray) -> float:
