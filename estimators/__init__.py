@@ -1,5 +1,6 @@
 """Identification models and estimators for spaceid-gym.
 
-Empty so far: the identification model, the estimator protocol and the estimators are the work of
-the next issue. The package exists so that the layout the users asked for is in place.
+So far: :class:`estimators.models.MomentumModel`, the batched identification model (base rate
+over a log for many parameter vectors). The estimator protocol and the estimators (improved PSO
+and the others) are the rest of the estimators issue.
 """
