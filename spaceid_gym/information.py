@@ -35,14 +35,6 @@ def log_det(information: FloatArray) -> float:
     return float(2.0 * np.sum(np.log(np.diag(chol))))
 
 
-def information_gain_nats(before: FloatArray, after: FloatArray) -> float:
-    """Information added going from ``before`` to ``after``: ``0.5 (log det after - log det before)``.
-
-    For Gaussian posteriors this is the entropy reduction in nats.
-    """
-    return 0.5 * (log_det(after) - log_det(before))
-
-
 def cramer_rao_std(information: FloatArray, rank_tolerance: float = 1e-9) -> FloatArray:
     """Standard deviations of the Cramér-Rao bound, ``sqrt(diag(F^{-1}))``, shape (k,).
 
