@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 
 from spaceid_gym.log import MeasurementLog
 from spaceid_gym.physics.fuel import base_params10_after_fuel
+from spaceid_gym.physics.inertia import point_mass_inertia
 from spaceid_gym.robots import Robot
 
 FloatArray = NDArray[np.float64]
@@ -52,9 +53,7 @@ class MomentumModel:
             coupling = pin.crba(model, data, q_full)[:6, 6:]
             arm = data.Ycrb[1]
             first_moment[i] = arm.mass * arm.lever
-            inertia_origin[i] = arm.inertia + arm.mass * (
-                np.dot(arm.lever, arm.lever) * np.eye(3) - np.outer(arm.lever, arm.lever)
-            )
+            inertia_origin[i] = arm.inertia + arm.mass * point_mass_inertia(arm.lever)
             arm_momentum[i] = coupling @ dq
         self.arm_mass_kg = float(sum(model.inertias[i].mass for i in range(2, model.njoints)))
         self.n_samples = n

@@ -186,10 +186,8 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             raise SpaceIdInputError(f"reset options: unknown keys {sorted(options)}; expected fuel_consumed_kg, tank_position_m")
         base = base_after_fuel(base_full, fuel, tank)  # validates before any state changes
         self._tank, self._fuel_consumed_kg, self._episode = tank, fuel, episode
-        self._theta = np.concatenate(([self._fuel_consumed_kg], self._tank))
-        self._directions = base_parameter_directions(
-            base_params10_fuel_jacobian(base_full.com_m, self._theta) * self._param_scale
-        )
+        theta = np.concatenate(([self._fuel_consumed_kg], self._tank))
+        self._directions = base_parameter_directions(base_params10_fuel_jacobian(base_full.com_m, theta) * self._param_scale)
         self.simulator = FreeFloatingSimulator(self.robot, base)
         q0 = self.robot.home_configuration() + self.np_random.uniform(-0.3, 0.3, size=self.robot.n_joints)
         state = self.simulator.reset(q0_rad=np.clip(q0, self.robot.q_lower_rad, self.robot.q_upper_rad))

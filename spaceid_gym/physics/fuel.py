@@ -63,6 +63,12 @@ def base_after_fuel(base_full: RigidBodyInertia, fuel_consumed_kg: float, tank_p
     return RigidBodyInertia(m0, b0, inertia0).validate(f"base after removing {mdf:g} kg of fuel at tank position {bf.tolist()} m")
 
 
+def _point_mass_params10(r_m: FloatArray) -> FloatArray:
+    """Inertial parameters (pinocchio order) of a unit point mass at ``r`` (..., 3) about the origin."""
+    x, y, z = r_m[..., 0], r_m[..., 1], r_m[..., 2]
+    return np.stack([np.ones_like(x), x, y, z, y * y + z * z, -x * y, x * x + z * z, -x * z, -y * z, x * x + y * y], axis=-1)
+
+
 def base_params10_after_fuel(base_full_params10: FloatArray, com_full_m: FloatArray, theta: FloatArray) -> FloatArray:
     """Base inertial parameters (about the base origin) after fuel removal; batched.
 
@@ -77,9 +83,7 @@ def base_params10_after_fuel(base_full_params10: FloatArray, com_full_m: FloatAr
     th = np.asarray(theta, dtype=float)
     mdf = th[..., 0]
     r = np.asarray(com_full_m, dtype=float) + th[..., 1:4]
-    x, y, z = r[..., 0], r[..., 1], r[..., 2]
-    point = np.stack([np.ones_like(mdf), x, y, z, y * y + z * z, -x * y, x * x + z * z, -x * z, -y * z, x * x + y * y], axis=-1)
-    return np.asarray(base_full_params10, dtype=float) - mdf[..., None] * point
+    return np.asarray(base_full_params10, dtype=float) - mdf[..., None] * _point_mass_params10(r)
 
 
 def base_params10_fuel_jacobian(com_full_m: FloatArray, theta: FloatArray) -> FloatArray:
@@ -87,7 +91,7 @@ def base_params10_fuel_jacobian(com_full_m: FloatArray, theta: FloatArray) -> Fl
     mdf, bf = float(theta[0]), np.asarray(theta[1:4], dtype=float)
     x, y, z = np.asarray(com_full_m, dtype=float) + bf
     jac = np.zeros((10, 4))
-    jac[:, 0] = -np.array([1.0, x, y, z, y * y + z * z, -x * y, x * x + z * z, -x * z, -y * z, x * x + y * y])
+    jac[:, 0] = -_point_mass_params10(np.array([x, y, z]))
     # derivatives of the point-mass entries with respect to x, y, z
     d_point = np.array(
         [

@@ -99,10 +99,6 @@ class RigidBodyInertia:
         com = p[1:4] / mass
         return cls(mass, com, inertia_matrix_from_entries(p[4:10]) - mass * point_mass_inertia(com))
 
-    def spatial_matrix(self) -> FloatArray:
-        """6x6 spatial inertia about the frame origin, ``[linear; angular]`` order."""
-        return spatial_inertia_matrix(self.to_params10())
-
 
 def inertia_matrix_from_entries(entries: FloatArray) -> FloatArray:
     """3x3 symmetric matrix from ``[Ixx, Ixy, Iyy, Ixz, Iyz, Izz]``, shape (..., 6) -> (..., 3, 3)."""

@@ -37,12 +37,6 @@ def momentum_world_to_base(h_world: FloatArray, rot_wb: FloatArray, p_wb_m: Floa
     return out
 
 
-def momentum_base_to_world(h_base: FloatArray, rot_wb: FloatArray, p_wb_m: FloatArray) -> FloatArray:
-    """Inverse of :func:`momentum_world_to_base`."""
-    lin_w = rot_wb @ h_base[:3]
-    return np.concatenate((lin_w, rot_wb @ h_base[3:] + np.cross(p_wb_m, lin_w)))
-
-
 def base_parameter_directions(dparams10: FloatArray) -> FloatArray:
     """``sum_j dparams10[j, k] B_j`` for each column k: (k, 6, 6), ``B_j`` the spatial-inertia basis."""
     return np.einsum("jk,jab->kab", dparams10, SPATIAL_INERTIA_BASIS)

@@ -91,8 +91,6 @@ class FreeFloatingSimulator:
             :func:`spaceid_gym.physics.fuel.base_after_fuel`).
         servo: the joint servo; default :func:`spaceid_gym.sim.servo.default_servo`.
         substeps: integration intervals per smooth piece of a control period (>= 1).
-        split_at_switches: split integration intervals at the servo's switch times (keeps the
-            scheme fourth order where the joint acceleration jumps; default True).
     """
 
     def __init__(
@@ -101,7 +99,6 @@ class FreeFloatingSimulator:
         base: RigidBodyInertia,
         servo: RateServo | None = None,
         substeps: int = 1,
-        split_at_switches: bool = True,
     ) -> None:
         if substeps < 1:
             raise ValueError(f"substeps: expected >= 1, got {substeps}")
@@ -110,7 +107,6 @@ class FreeFloatingSimulator:
         self.data = self.model.createData()
         self.servo = servo if servo is not None else default_servo(robot.rate_limit_rad_s)
         self.substeps = int(substeps)
-        self.split_at_switches = split_at_switches
         self.total_mass_kg = float(sum(inertia.mass for inertia in self.model.inertias))
         self.momentum_world = np.zeros(6)
         self._zero_momentum = True
@@ -156,10 +152,9 @@ class FreeFloatingSimulator:
         s = self.state
         servo = self.servo
         u = servo.limit_command(rate_command_rad_s, s.q_rad, self.robot.q_lower_rad, self.robot.q_upper_rad, dt_s)
-        cuts = [0.0, dt_s]
-        if self.split_at_switches:
-            switches = servo.switch_times(s.dq_rad_s, u)
-            cuts = sorted({0.0, dt_s, *(t for t in switches if 0.0 < t < dt_s)})
+        # split at the servo's switch times, where the joint acceleration jumps: keeps fourth order
+        switches = servo.switch_times(s.dq_rad_s, u).tolist()
+        cuts = sorted({0.0, dt_s, *(t for t in switches if 0.0 < t < dt_s)})
         if self.substeps > 1:
             cuts = sorted({float(t) for a, b in itertools.pairwise(cuts) for t in np.linspace(a, b, self.substeps + 1)})
         # joint motion at every interval's midpoint and end (t = 0 is the current state)
