@@ -8,6 +8,11 @@ closed form ``omega = -Ic^{-1} (L - c x P)`` with ``[P; L] = h_arm`` (the invers
 inertia, with ``Ic`` the composite inertia about the composite CoM), evaluated here
 for P parameter vectors times T samples in one compiled (numba) loop, no per-sample Python.
 
+An unknown **payload** held by the last link (10 parameters ``pi`` about the last joint's origin,
+in its frame) adds ``A_t pi`` to the composite's parameters (``A_t`` the frame change of the
+parameters, linear) and ``G_t pi`` to the momentum (``G_t`` maps ``pi`` to the payload's momentum
+for the last link's velocity relative to the base), both precomputed per sample.
+
 This model never touches the simulator's integration path: it needs only the log's ``q`` and ``dq``.
 """
 
@@ -20,14 +25,15 @@ from numpy.typing import NDArray
 
 from spaceid_gym.log import MeasurementLog
 from spaceid_gym.physics.fuel import base_params10_after_fuel
-from spaceid_gym.physics.inertia import point_mass_inertia
+from spaceid_gym.physics.inertia import SPATIAL_INERTIA_BASIS, point_mass_inertia, spatial_inertia_matrix, transform_params10
 from spaceid_gym.robots import Robot
 
 FloatArray = NDArray[np.float64]
+Samples = slice | NDArray[np.intp]
 
 
 class MomentumModel:
-    """Predicts the base angular velocity (base body frame) over a log, for many base parameter sets.
+    """Predicts the base angular velocity (base body frame) over a log, for many parameter sets.
 
     Args:
         robot: the robot (its URDF's full-tank base is the nominal base).
@@ -61,59 +67,180 @@ class MomentumModel:
         # (T, 6) kg m^2 about the base origin: xx, xy, yy, xz, yz, zz (pinocchio's order)
         self._inertia6 = np.ascontiguousarray(inertia_origin[:, [0, 0, 1, 0, 1, 2], [0, 1, 1, 2, 2, 2]])
         self._momentum = arm_momentum  # (T, 6), [P; L] of the arm's motion, base frame
+        self._model, self._data, self._log = model, data, log
+        self._payload_terms: tuple[FloatArray, FloatArray] | None = None
 
-    def predict_base_params(self, params10: FloatArray, samples: slice | NDArray[np.intp] = slice(None)) -> FloatArray:
-        """Base angular velocity for base inertial parameters ``params10`` (P, 10), pinocchio order.
+    # ------------------------------------------------------------------ predictions
+    def predict(self, base10: FloatArray, payload10: FloatArray | None = None, samples: Samples = slice(None)) -> FloatArray:
+        """Base angular velocity (rad/s, base body frame) for P parameter sets, shape (P, T, 3).
 
         Args:
-            params10: base parameters about the base-frame origin, shape (P, 10) or (10,).
+            base10: base inertial parameters about the base-frame origin, pinocchio order, (P, 10).
+            payload10: parameters of a payload on the last link about the last joint's origin in
+                its frame, (P, 10), or ``None`` for no payload.
             samples: which samples of the log (default all).
-
-        Returns:
-            ``omega_base_body`` in rad/s, shape (P, T, 3) (or (T, 3) for a single parameter vector).
         """
-        p = np.atleast_2d(np.asarray(params10, dtype=float))
-        omega = _base_rate(p, self.arm_mass_kg, self._first_moment[samples], self._inertia6[samples], self._momentum[samples])
+        base = np.atleast_2d(np.asarray(base10, dtype=float))
+        arm = (self._first_moment[samples], self._inertia6[samples], self._momentum[samples])
+        if payload10 is None:
+            return _base_rate(base, self.arm_mass_kg, *arm)
+        to_base, momentum_map = self._payload_maps()
+        payload = np.atleast_2d(np.asarray(payload10, dtype=float))
+        return _base_rate_with_payload(base, payload, self.arm_mass_kg, *arm, to_base[samples], momentum_map[samples])
+
+    def predict_base_params(self, params10: FloatArray, samples: Samples = slice(None)) -> FloatArray:
+        """Base rate for base parameters ``params10`` (P, 10) or (10,): (P, T, 3) or (T, 3)."""
+        omega = self.predict(params10, None, samples)
         return omega[0] if np.ndim(params10) == 1 else omega
 
-    def predict_fuel(self, theta: FloatArray, samples: slice | NDArray[np.intp] = slice(None)) -> FloatArray:
-        """Base angular velocity for fuel parameters ``theta = [mdf kg, bf m (3)]``, shape (P, 4) or (4,).
-
-        Returns shape (P, T, 3) (or (T, 3) for one vector), rad/s, base body frame.
-        """
+    def predict_fuel(self, theta: FloatArray, samples: Samples = slice(None)) -> FloatArray:
+        """Base rate for fuel parameters ``theta = [mdf kg, bf m (3)]``, (P, 4) or (4,): (P, T, 3) or (T, 3)."""
         full = self.robot.base_full
         return self.predict_base_params(base_params10_after_fuel(full.to_params10(), full.com_m, theta), samples)
+
+    def jacobian(
+        self, base10: FloatArray, payload10: FloatArray | None = None, samples: Samples = slice(None)
+    ) -> tuple[FloatArray, FloatArray | None]:
+        """Analytic ``d omega / d base10`` and ``d omega / d payload10`` at one parameter set.
+
+        From ``M v = -h`` with ``M`` the composite spatial inertia: ``dv/dp_k = -M^{-1} (B_k v + dh/dp_k)``.
+
+        Returns:
+            ``(d_base, d_payload)``, each (T, 3, 10) (rad/s per parameter unit); ``d_payload``
+            is ``None`` without a payload.
+        """
+        base = np.asarray(base10, dtype=float)
+        arm10 = np.concatenate(
+            (np.full((self.n_samples, 1), self.arm_mass_kg), self._first_moment, self._inertia6), axis=1
+        )[samples]
+        composite10 = arm10 + base
+        momentum = self._momentum[samples]
+        if payload10 is not None:
+            to_base, momentum_map = (m[samples] for m in self._payload_maps())
+            payload = np.asarray(payload10, dtype=float)
+            composite10 = composite10 + to_base @ payload
+            momentum = momentum + momentum_map @ payload
+        inertia = spatial_inertia_matrix(composite10)  # (T, 6, 6)
+        twist = -np.linalg.solve(inertia, momentum[..., None])[..., 0]  # (T, 6)
+        basis_twist = np.einsum("kab,tb->tak", SPATIAL_INERTIA_BASIS, twist)  # (T, 6, 10): B_k v
+        d_base = -np.linalg.solve(inertia, basis_twist)
+        if payload10 is None:
+            return d_base[:, 3:], None
+        d_payload = -np.linalg.solve(inertia, basis_twist @ to_base + momentum_map)
+        return d_base[:, 3:], d_payload[:, 3:]
+
+    # ------------------------------------------------------------------ internals
+    def _payload_maps(self) -> tuple[FloatArray, FloatArray]:
+        """Per-sample ``A_t`` (T, 10, 10) and ``G_t`` (T, 6, 10) of the module docstring (computed once)."""
+        if self._payload_terms is None:
+            rot, pos, twist = self._last_link_motion()
+            eye = np.eye(10)
+            to_base = np.stack([transform_params10(eye, r, p).T for r, p in zip(rot, pos, strict=True)])
+            # payload momentum in the last link's frame is B(pi) v_link; express it at the base origin
+            local = np.einsum("kab,tb->tak", SPATIAL_INERTIA_BASIS, twist)  # (T, 6, 10)
+            force_to_base = np.zeros((len(rot), 6, 6))
+            force_to_base[:, :3, :3] = rot
+            force_to_base[:, 3:, 3:] = rot
+            skew_pos = np.zeros((len(rot), 3, 3))
+            skew_pos[:, 0, 1], skew_pos[:, 0, 2], skew_pos[:, 1, 2] = -pos[:, 2], pos[:, 1], -pos[:, 0]
+            skew_pos -= np.swapaxes(skew_pos, 1, 2)
+            force_to_base[:, 3:, :3] = skew_pos @ rot
+            self._payload_terms = (np.ascontiguousarray(to_base), np.ascontiguousarray(force_to_base @ local))
+        return self._payload_terms
+
+    def _last_link_motion(self) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Last link's rotation (T, 3, 3), position (T, 3) in the base frame and twist relative to the base, own frame (T, 6)."""
+        model, data, log = self._model, self._data, self._log
+        last = model.njoints - 1
+        q_full, v_full = pin.neutral(model), np.zeros(model.nv)
+        rot, pos, twist = np.empty((self.n_samples, 3, 3)), np.empty((self.n_samples, 3)), np.empty((self.n_samples, 6))
+        for i, (q, dq) in enumerate(zip(log.q_rad, log.dq_rad_s, strict=True)):
+            q_full[7:], v_full[6:] = q, dq
+            pin.forwardKinematics(model, data, q_full, v_full)  # base at rest at the origin: joint motion only
+            rot[i], pos[i], twist[i] = data.oMi[last].rotation, data.oMi[last].translation, data.v[last].vector
+        return rot, pos, twist
+
+
+@njit(cache=True, inline="always")
+def _rate_of_composite(
+    mass: float, hx: float, hy: float, hz: float, j: FloatArray, momentum: FloatArray, out: FloatArray
+) -> None:
+    """``omega`` of a composite (mass, first moment h, inertia entries j about the origin) with momentum ``-h_arm``."""
+    cx, cy, cz = hx / mass, hy / mass, hz / mass  # composite CoM, base frame
+    # composite inertia about its CoM, Ic = J - m S(c): [[a b e] [b d f] [e f g]]
+    a = j[0] - mass * (cy * cy + cz * cz)
+    b = j[1] + mass * cx * cy
+    d = j[2] - mass * (cx * cx + cz * cz)
+    e = j[3] + mass * cx * cz
+    f = j[4] + mass * cy * cz
+    g = j[5] - mass * (cx * cx + cy * cy)
+    px, py, pz = momentum[0], momentum[1], momentum[2]
+    # the base carries -h_arm: omega = Ic^{-1} r with r = -(L - c x P)
+    rx = -(momentum[3] - (cy * pz - cz * py))
+    ry = -(momentum[4] - (cz * px - cx * pz))
+    rz = -(momentum[5] - (cx * py - cy * px))
+    c00, c01, c02 = d * g - f * f, e * f - b * g, b * f - d * e
+    c11, c12, c22 = a * g - e * e, b * e - a * f, a * d - b * b
+    inv_det = 1.0 / (a * c00 + b * c01 + e * c02)
+    out[0] = (c00 * rx + c01 * ry + c02 * rz) * inv_det
+    out[1] = (c01 * rx + c11 * ry + c12 * rz) * inv_det
+    out[2] = (c02 * rx + c12 * ry + c22 * rz) * inv_det
 
 
 @njit(cache=True)
 def _base_rate(
     params10: FloatArray, arm_mass: float, first: FloatArray, inertia6: FloatArray, momentum: FloatArray
 ) -> FloatArray:
-    """``omega`` (P, T, 3) for base parameters (P, 10) and per-sample arm terms (T, ...); see the module docstring."""
+    """``omega`` (P, T, 3) for base parameters (P, 10) and per-sample arm terms (T, ...)."""
     n_p, n_t = params10.shape[0], first.shape[0]
     out = np.empty((n_p, n_t, 3))
+    j = np.empty(6)
     for i in range(n_p):
         mass = params10[i, 0] + arm_mass
         for t in range(n_t):
-            cx = (params10[i, 1] + first[t, 0]) / mass  # composite CoM, base frame
-            cy = (params10[i, 2] + first[t, 1]) / mass
-            cz = (params10[i, 3] + first[t, 2]) / mass
-            # composite inertia about its CoM, Ic = J - m S(c): [[a b e] [b d f] [e f g]]
-            a = params10[i, 4] + inertia6[t, 0] - mass * (cy * cy + cz * cz)
-            b = params10[i, 5] + inertia6[t, 1] + mass * cx * cy
-            d = params10[i, 6] + inertia6[t, 2] - mass * (cx * cx + cz * cz)
-            e = params10[i, 7] + inertia6[t, 3] + mass * cx * cz
-            f = params10[i, 8] + inertia6[t, 4] + mass * cy * cz
-            g = params10[i, 9] + inertia6[t, 5] - mass * (cx * cx + cy * cy)
-            px, py, pz = momentum[t, 0], momentum[t, 1], momentum[t, 2]
-            # the base carries -h_arm: omega = Ic^{-1} r with r = -(L - c x P)
-            rx = -(momentum[t, 3] - (cy * pz - cz * py))
-            ry = -(momentum[t, 4] - (cz * px - cx * pz))
-            rz = -(momentum[t, 5] - (cx * py - cy * px))
-            c00, c01, c02 = d * g - f * f, e * f - b * g, b * f - d * e
-            c11, c12, c22 = a * g - e * e, b * e - a * f, a * d - b * b
-            inv_det = 1.0 / (a * c00 + b * c01 + e * c02)
-            out[i, t, 0] = (c00 * rx + c01 * ry + c02 * rz) * inv_det
-            out[i, t, 1] = (c01 * rx + c11 * ry + c12 * rz) * inv_det
-            out[i, t, 2] = (c02 * rx + c12 * ry + c22 * rz) * inv_det
+            for k in range(6):
+                j[k] = params10[i, 4 + k] + inertia6[t, k]
+            _rate_of_composite(
+                mass,
+                params10[i, 1] + first[t, 0],
+                params10[i, 2] + first[t, 1],
+                params10[i, 3] + first[t, 2],
+                j,
+                momentum[t],
+                out[i, t],
+            )
+    return out
+
+
+@njit(cache=True)
+def _base_rate_with_payload(
+    params10: FloatArray,
+    payload10: FloatArray,
+    arm_mass: float,
+    first: FloatArray,
+    inertia6: FloatArray,
+    momentum: FloatArray,
+    to_base: FloatArray,
+    momentum_map: FloatArray,
+) -> FloatArray:
+    """``omega`` (P, T, 3) with a payload (P, 10) on the last link: adds ``A_t pi`` and ``G_t pi``."""
+    n_p, n_t = params10.shape[0], first.shape[0]
+    out = np.empty((n_p, n_t, 3))
+    j = np.empty(6)
+    h = np.empty(6)
+    for i in range(n_p):
+        for t in range(n_t):
+            extra = to_base[t] @ payload10[i]
+            h[:] = momentum[t] + momentum_map[t] @ payload10[i]
+            for k in range(6):
+                j[k] = params10[i, 4 + k] + inertia6[t, k] + extra[4 + k]
+            _rate_of_composite(
+                params10[i, 0] + arm_mass + extra[0],
+                params10[i, 1] + first[t, 0] + extra[1],
+                params10[i, 2] + first[t, 1] + extra[2],
+                params10[i, 3] + first[t, 2] + extra[3],
+                j,
+                h,
+                out[i, t],
+            )
     return out

@@ -129,3 +129,31 @@ def spatial_inertia_matrix(params10: FloatArray) -> FloatArray:
 
 #: ``SPATIAL_INERTIA_BASIS[k]`` is d(spatial inertia)/d(params10[k]), shape (10, 6, 6)
 SPATIAL_INERTIA_BASIS: FloatArray = spatial_inertia_matrix(np.eye(10))
+
+
+def transform_params10(params10: FloatArray, rot: FloatArray, trans_m: FloatArray) -> FloatArray:
+    """Express a body's 10 inertial parameters in a parent frame; batched over (..., 10).
+
+    The body's parameters are given about the origin of a child frame ``C`` with axes of ``C``;
+    ``C`` has orientation ``rot`` (3, 3) and origin ``trans_m`` (3,) in the parent frame ``P``.
+    With ``h = m c`` and ``J`` the inertia about ``C``'s origin: ``h' = R h + m p`` and
+    ``J' = R J R^T + m S(p) + 2 (p . R h) E - p (R h)^T - (R h) p^T``. The map is linear in the
+    parameters (so it also maps differences and basis vectors).
+    """
+    p = np.asarray(params10, dtype=float)
+    r = np.asarray(rot, dtype=float)
+    t = np.asarray(trans_m, dtype=float)
+    mass = p[..., 0]
+    rh = p[..., 1:4] @ r.T
+    j_rot = r @ inertia_matrix_from_entries(p[..., 4:10]) @ r.T
+    p_dot_rh = rh @ t
+    outer = t[:, None] * rh[..., None, :]
+    inertia = (
+        j_rot
+        + mass[..., None, None] * point_mass_inertia(t)
+        + 2.0 * p_dot_rh[..., None, None] * np.eye(3)
+        - outer
+        - np.swapaxes(outer, -1, -2)
+    )
+    entries = np.stack([inertia[..., i, j] for i, j in _INERTIA_ENTRIES], axis=-1)
+    return np.concatenate((mass[..., None], rh + mass[..., None] * t, entries), axis=-1)

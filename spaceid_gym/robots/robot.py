@@ -11,7 +11,7 @@ Frames and units
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from importlib import resources
 from pathlib import Path
 
@@ -75,6 +75,20 @@ class Robot:
         model = pin.Model(self.model)
         model.inertias[1] = pin.Inertia(base.mass_kg, np.asarray(base.com_m, float), np.asarray(base.inertia_com_kgm2, float))
         return model
+
+    def with_payload(self, payload: RigidBodyInertia) -> Robot:
+        """The same robot holding ``payload`` rigidly on its last link (mass properties in that link's frame).
+
+        Only the dynamics change (the last body's inertia grows); ``urdf_text`` stays the robot as
+        described, without the payload, as an estimator would be given it.
+        """
+        payload.validate("payload")
+        model = pin.Model(self.model)
+        last = model.njoints - 1
+        model.inertias[last] = model.inertias[last] + pin.Inertia(
+            payload.mass_kg, np.asarray(payload.com_m, float), np.asarray(payload.inertia_com_kgm2, float)
+        )
+        return replace(self, model=model)
 
     def arm_mass_kg(self) -> float:
         """Total mass of the arm links (everything but the base), kg."""

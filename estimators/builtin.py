@@ -1,0 +1,28 @@
+"""Registers the shipped estimators under their names (imported lazily by :mod:`estimators.registry`)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from estimators.base import Estimator
+
+
+def builtin_estimators() -> dict[str, Callable[..., Estimator]]:
+    """The shipped estimators by registry name."""
+    from estimators.hybrid import HybridEstimator
+    from estimators.improved_pso import ImprovedPSO
+    from estimators.least_squares import LevenbergMarquardt
+    from estimators.neural import NeuralNetworkEstimator
+    from estimators.pso import ParticleSwarm
+    from estimators.reference import CMAES, DifferentialEvolution, PyswarmsLocalBest
+
+    return {
+        "pso": ParticleSwarm,
+        "improved-pso": ImprovedPSO,
+        "lm": LevenbergMarquardt,
+        "hybrid": HybridEstimator,
+        "nn": NeuralNetworkEstimator,
+        "de": DifferentialEvolution,
+        "cma-es": CMAES,
+        "pyswarms-local": PyswarmsLocalBest,
+    }

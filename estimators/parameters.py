@@ -1,0 +1,217 @@
+"""What is identified: the unknowns of the identification model and their search ranges.
+
+A parameterisation maps an unknown vector ``theta`` (k,) to the base's 10 inertial parameters and,
+optionally, a payload's, and back to physical quantities (mass, CoM, inertia) for the estimate
+file. Three are provided:
+
+* ``fuel`` (the paper's, k = 4): consumed fuel ``mdf`` (kg) and tank position ``bf`` (m, base
+  frame, from the full-tank CoM); the base follows eqs. 10-12 (corrected).
+* ``base`` (k = 10): the base's 10 inertial parameters about the base-frame origin (pinocchio
+  order), the general case when the base changed for any reason.
+* ``payload`` (k = 10): an unknown object held rigidly by the last link, 10 parameters about the
+  last joint's origin in its frame; the base is the known full-tank base.
+
+Search ranges (documented defaults, overridable with ``lower``/``upper``):
+
+* fuel: ``mdf`` in ``[0, 1.2 x usable fuel]`` and ``bf`` in ``+-1.25 x`` the tank box half-width of
+  :class:`~spaceid_gym.sim.mission.FuelSchedule` (wider than the mission's draws, so truths never sit
+  on a bound);
+* base: mass ``+-50 %``, first moments ``+-0.5 r_g m`` (``r_g`` the radius of gyration), inertia
+  entries about the origin ``+-50 %`` of the largest principal moment around the nominal;
+* payload: mass ``[0, payload_max_kg]`` (default the arm's mass), first moments
+  ``+-payload_max_kg x payload_size_m``, inertia entries ``+-payload_max_kg x payload_size_m^2``
+  (diagonal ``[0, 2 m_max s^2]``); ``payload_size_m`` defaults to 0.5 m.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.physics.fuel import FUEL_PARAMETER_NAMES, base_params10_after_fuel, base_params10_fuel_jacobian
+from spaceid_gym.physics.inertia import RigidBodyInertia
+from spaceid_gym.robots import Robot
+from spaceid_gym.sim.mission import FuelSchedule
+
+FloatArray = NDArray[np.float64]
+
+#: names of the 10 inertial parameters about a frame origin (pinocchio order)
+PARAMS10_NAMES = ("mass_kg", "mcx_kgm", "mcy_kgm", "mcz_kgm", "ixx_kgm2", "ixy_kgm2", "iyy_kgm2", "ixz_kgm2", "iyz_kgm2", "izz_kgm2")
+
+
+class Parameterisation(ABC):
+    """The unknowns ``theta`` (k,) of an identification model.
+
+    Attributes:
+        name: ``"fuel"``, ``"base"``, ``"payload"`` or a user's name.
+        names: parameter names with units, (k,).
+        nominal: the value assumed without identification, (k,) (inside the bounds).
+        lower, upper: the search range, (k,).
+    """
+
+    name: str
+    names: tuple[str, ...]
+
+    def __init__(self, nominal: FloatArray, lower: FloatArray, upper: FloatArray) -> None:
+        self.nominal = np.asarray(nominal, dtype=float)
+        self.lower = np.asarray(lower, dtype=float)
+        self.upper = np.asarray(upper, dtype=float)
+        k = len(self.names)
+        for label, value in (("nominal", self.nominal), ("lower", self.lower), ("upper", self.upper)):
+            if value.shape != (k,) or not np.all(np.isfinite(value)):
+                raise SpaceIdInputError(f"{self.name} parameters: {label} must be {k} finite numbers ({', '.join(self.names)})")
+        bad = [n for n, lo, hi in zip(self.names, self.lower, self.upper, strict=True) if not lo < hi]
+        if bad:
+            raise SpaceIdInputError(f"{self.name} parameters: lower bound not below upper bound for {', '.join(bad)}")
+        outside = [
+            f"{n} (nominal {v:g} not in [{lo:g}, {hi:g}])"
+            for n, v, lo, hi in zip(self.names, self.nominal, self.lower, self.upper, strict=True)
+            if not lo <= v <= hi
+        ]
+        if outside:
+            raise SpaceIdInputError(f"{self.name} parameters: the bounds exclude the nominal value: {'; '.join(outside)}")
+
+    @property
+    def n_params(self) -> int:
+        """k."""
+        return len(self.names)
+
+    @property
+    def width(self) -> FloatArray:
+        """``upper - lower`` (k,): the unit of the search space and of the identifiability test."""
+        return self.upper - self.lower
+
+    @abstractmethod
+    def composite(self, theta: FloatArray) -> tuple[FloatArray, FloatArray | None]:
+        """Base params10 (P, 10) and payload params10 (P, 10) or ``None``, for ``theta`` (P, k)."""
+
+    @abstractmethod
+    def composite_jacobian(self, theta: FloatArray) -> tuple[FloatArray, FloatArray | None]:
+        """``d base10 / d theta`` (10, k) and ``d payload10 / d theta`` (10, k) or ``None``, at ``theta`` (k,)."""
+
+    @abstractmethod
+    def physical(self, theta: FloatArray) -> dict[str, Any]:
+        """Physical quantities (floats and arrays) at ``theta`` (k,), with the keys of ``truth.json``."""
+
+
+def _base_quantities(base10: FloatArray) -> dict[str, Any]:
+    body = RigidBodyInertia.from_params10(base10)
+    return {"base_mass_kg": body.mass_kg, "base_com_m": body.com_m, "base_inertia_kgm2": body.inertia_com_kgm2}
+
+
+class FuelParameters(Parameterisation):
+    """``theta = [mdf kg, bf_x m, bf_y m, bf_z m]``: the paper's four fuel unknowns."""
+
+    name = "fuel"
+    names = FUEL_PARAMETER_NAMES
+
+    def __init__(
+        self,
+        robot: Robot,
+        schedule: FuelSchedule | None = None,
+        lower: FloatArray | None = None,
+        upper: FloatArray | None = None,
+    ) -> None:
+        self.base_full = robot.base_full
+        schedule = schedule or FuelSchedule()
+        half = 1.25 * schedule.tank_half_width_m(self.base_full)
+        default_upper = np.array([1.2 * schedule.usable_fraction * self.base_full.mass_kg, half, half, half])
+        super().__init__(
+            np.zeros(4),
+            np.array([0.0, -half, -half, -half]) if lower is None else lower,
+            default_upper if upper is None else upper,
+        )
+        if self.upper[0] >= self.base_full.mass_kg or self.lower[0] < 0.0:
+            raise SpaceIdInputError(
+                f"fuel parameters: fuel_consumed_kg bounds must lie in [0, {self.base_full.mass_kg:g}) kg (the full-tank base mass)"
+            )
+
+    def composite(self, theta: FloatArray) -> tuple[FloatArray, None]:
+        full = self.base_full
+        return base_params10_after_fuel(full.to_params10(), full.com_m, np.atleast_2d(theta)), None
+
+    def composite_jacobian(self, theta: FloatArray) -> tuple[FloatArray, None]:
+        return base_params10_fuel_jacobian(self.base_full.com_m, theta), None
+
+    def physical(self, theta: FloatArray) -> dict[str, Any]:
+        quantities = _base_quantities(self.composite(theta)[0][0])
+        return {"fuel_consumed_kg": float(theta[0]), "tank_position_m": np.asarray(theta[1:4], dtype=float), **quantities}
+
+
+class BaseParameters(Parameterisation):
+    """``theta`` = the base's 10 inertial parameters about the base-frame origin (pinocchio order)."""
+
+    name = "base"
+    names = tuple(f"base_{n}" for n in PARAMS10_NAMES)
+
+    def __init__(self, robot: Robot, lower: FloatArray | None = None, upper: FloatArray | None = None) -> None:
+        full = robot.base_full
+        nominal = full.to_params10()
+        mass = full.mass_kg
+        radius = float(np.sqrt(np.trace(full.inertia_com_kgm2) / (2.0 * mass)))
+        inertia = 0.5 * float(np.linalg.eigvalsh(full.inertia_com_kgm2).max())
+        spread = np.array([0.5 * mass, *([0.5 * radius * mass] * 3), *([inertia] * 6)])
+        super().__init__(nominal, nominal - spread if lower is None else lower, nominal + spread if upper is None else upper)
+
+    def composite(self, theta: FloatArray) -> tuple[FloatArray, None]:
+        return np.atleast_2d(np.asarray(theta, dtype=float)), None
+
+    def composite_jacobian(self, theta: FloatArray) -> tuple[FloatArray, None]:
+        return np.eye(10), None
+
+    def physical(self, theta: FloatArray) -> dict[str, Any]:
+        return _base_quantities(np.asarray(theta, dtype=float))
+
+
+class PayloadParameters(Parameterisation):
+    """``theta`` = 10 inertial parameters of a payload on the last link, about the last joint's origin, its frame."""
+
+    name = "payload"
+    names = tuple(f"payload_{n}" for n in PARAMS10_NAMES)
+
+    def __init__(
+        self,
+        robot: Robot,
+        payload_max_kg: float | None = None,
+        payload_size_m: float = 0.5,
+        lower: FloatArray | None = None,
+        upper: FloatArray | None = None,
+    ) -> None:
+        self.base10 = robot.base_full.to_params10()
+        m_max = robot.arm_mass_kg() if payload_max_kg is None else float(payload_max_kg)
+        if not (np.isfinite(m_max) and m_max > 0.0 and np.isfinite(payload_size_m) and payload_size_m > 0.0):
+            raise SpaceIdInputError("payload parameters: payload_max_kg and payload_size_m must be positive numbers")
+        h, j = m_max * payload_size_m, m_max * payload_size_m**2
+        default_lower = np.array([0.0, -h, -h, -h, 0.0, -j, 0.0, -j, -j, 0.0])
+        default_upper = np.array([m_max, h, h, h, 2 * j, j, 2 * j, j, j, 2 * j])
+        super().__init__(np.zeros(10), default_lower if lower is None else lower, default_upper if upper is None else upper)
+
+    def composite(self, theta: FloatArray) -> tuple[FloatArray, FloatArray]:
+        payload = np.atleast_2d(np.asarray(theta, dtype=float))
+        return np.broadcast_to(self.base10, payload.shape).copy(), payload
+
+    def composite_jacobian(self, theta: FloatArray) -> tuple[FloatArray, FloatArray]:
+        return np.zeros((10, 10)), np.eye(10)
+
+    def physical(self, theta: FloatArray) -> dict[str, Any]:
+        theta = np.asarray(theta, dtype=float)
+        out: dict[str, Any] = {"payload_mass_kg": float(theta[0])}
+        if theta[0] > 0.0:
+            body = RigidBodyInertia.from_params10(theta)
+            out.update(payload_com_m=body.com_m, payload_inertia_kgm2=body.inertia_com_kgm2)
+        return out
+
+
+#: the built-in parameterisations, by name
+PARAMETERISATIONS: dict[str, type[Parameterisation]] = {"fuel": FuelParameters, "base": BaseParameters, "payload": PayloadParameters}
+
+
+def make_parameterisation(name: str, robot: Robot, **options: Any) -> Parameterisation:
+    """The parameterisation ``name`` (``fuel``, ``base``, ``payload``) for ``robot``; options go to its constructor."""
+    if name not in PARAMETERISATIONS:
+        raise SpaceIdInputError(f"params: unknown parameterisation {name!r}; expected one of {', '.join(PARAMETERISATIONS)}")
+    return PARAMETERISATIONS[name](robot, **options)

@@ -1,0 +1,261 @@
+"""The identification model and the objective it defines on one log.
+
+:class:`IdentificationModel` says *what* is identified (robot, parameterisation, search range,
+noise); :meth:`IdentificationModel.problem` binds it to a log and gives the
+:class:`IdentificationProblem` every estimator works on:
+
+* ``cost(theta)`` (P, k) -> (P,): the paper's eq. 15, the mean squared difference between the
+  measured and predicted base rate (rad/s, base body frame) over the log's samples and 3 axes,
+  for a batch of P parameter vectors at once; ``samples=`` restricts it to part of the log;
+* ``residuals``/``jacobian``: the same for least squares, with the analytic Jacobian;
+* ``fisher``/``crlb_std``: Fisher information and Cramér-Rao bound of the log at ``theta``;
+* a counter of model evaluations (particle-samples), so estimators are compared at equal budget.
+
+Identifiability: a parameter whose Cramér-Rao standard deviation exceeds a quarter of its search
+range (or that lies in a direction the log does not inform at all) is *not identifiable from this
+log*: the data narrow it less than the prior range does, and the estimate reports a message instead
+of a number.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from estimators.estimate import Estimate
+from estimators.models.momentum_model import MomentumModel, Samples
+from estimators.parameters import Parameterisation, make_parameterisation
+from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.information import cramer_rao_std
+from spaceid_gym.log import MeasurementLog
+from spaceid_gym.robots import Robot, load_robot
+
+FloatArray = NDArray[np.float64]
+
+#: a parameter is identifiable if its Cramér-Rao std is below this fraction of its search range
+IDENTIFIABLE_FRACTION = 0.25
+
+
+class IdentificationModel:
+    """What is identified: robot, parameterisation and noise model (independent of any log).
+
+    Args:
+        robot: a :class:`~spaceid_gym.robots.Robot`, a shipped name or a URDF path (full-tank base).
+        params: ``"fuel"`` (default), ``"base"``, ``"payload"`` or a :class:`Parameterisation`.
+        noise_std_rad_s: gyro noise std per sample and axis (rad/s) for the Cramér-Rao bound;
+            ``None`` estimates it from the final residual (``sqrt(RSS / (3T - k))``).
+        **param_options: options of the parameterisation (``lower``, ``upper``, ...).
+    """
+
+    def __init__(
+        self,
+        robot: Robot | str,
+        params: str | Parameterisation = "fuel",
+        noise_std_rad_s: float | None = None,
+        **param_options: Any,
+    ) -> None:
+        self.robot = robot if isinstance(robot, Robot) else load_robot(robot)
+        self.parameters = params if isinstance(params, Parameterisation) else make_parameterisation(params, self.robot, **param_options)
+        if noise_std_rad_s is not None and not (np.isfinite(noise_std_rad_s) and noise_std_rad_s > 0.0):
+            raise SpaceIdInputError(f"noise_std_rad_s: expected a positive number (rad/s) or None, got {noise_std_rad_s!r}")
+        self.noise_std_rad_s = noise_std_rad_s
+
+    def problem(self, log: MeasurementLog) -> IdentificationProblem:
+        """The objective of this model on ``log`` (sets up the per-log arm terms once)."""
+        if log.n_joints != self.robot.n_joints:
+            raise SpaceIdInputError(f"log: has {log.n_joints} joints, the robot {self.robot.name!r} has {self.robot.n_joints}")
+        return IdentificationProblem(self, log)
+
+
+class IdentificationProblem:
+    """The objective of an :class:`IdentificationModel` on one log; see the module docstring.
+
+    Attributes:
+        parameters: the parameterisation (names, nominal, bounds).
+        n_samples: T; ``measured`` (T, 3) the logged base rate, rad/s, base body frame.
+        n_model_samples: model evaluations so far (particles x samples), the budget counter.
+    """
+
+    def __init__(self, model: IdentificationModel, log: MeasurementLog) -> None:
+        self.model = model
+        self.parameters = model.parameters
+        self.log = log
+        self.momentum = MomentumModel(model.robot, log)
+        self.measured = np.ascontiguousarray(log.omega_base_body_rad_s, dtype=float)
+        self.n_samples = log.n_samples
+        self.n_model_samples = 0
+
+    @property
+    def n_params(self) -> int:
+        """k."""
+        return self.parameters.n_params
+
+    @property
+    def n_evaluations(self) -> float:
+        """Objective evaluations so far, in whole-log equivalents."""
+        return self.n_model_samples / self.n_samples
+
+    # ------------------------------------------------------------------ objective
+    def predict(self, theta: FloatArray, samples: Samples = slice(None), count: bool = True) -> FloatArray:
+        """Predicted base rate (P, T', 3) for ``theta`` (P, k); counted in the budget unless ``count=False``."""
+        base10, payload10 = self.parameters.composite(np.atleast_2d(theta))
+        omega = self.momentum.predict(base10, payload10, samples)
+        if count:
+            self.n_model_samples += omega.shape[0] * omega.shape[1]
+        return omega
+
+    def cost(self, theta: FloatArray, samples: Samples = slice(None), count: bool = True) -> FloatArray:
+        """Mean squared residual (rad/s)^2 over ``samples`` and the 3 axes, for ``theta`` (P, k): (P,)."""
+        error = self.predict(theta, samples, count) - self.measured[samples]
+        return np.mean(error * error, axis=(1, 2))
+
+    def cost_on_subsets(self, theta: FloatArray, assignment: NDArray[np.intp], subsets: list[NDArray[np.intp]]) -> FloatArray:
+        """Cost of particle ``i`` on the samples ``subsets[assignment[i]]``: (P,) for ``theta`` (P, k)."""
+        theta = np.atleast_2d(theta)
+        out = np.empty(len(theta))
+        for s in np.unique(assignment):
+            chosen = assignment == s
+            out[chosen] = self.cost(theta[chosen], subsets[s])
+        return out
+
+    def subsets(self, n_subsets: int, kind: str = "interleaved") -> list[NDArray[np.intp]]:
+        """Split the log's samples into ``n_subsets`` parts: every n-th sample (``interleaved``) or blocks (``contiguous``)."""
+        if n_subsets < 1 or n_subsets > self.n_samples:
+            raise SpaceIdInputError(f"n_subsets: expected 1..{self.n_samples} (the log's samples), got {n_subsets}")
+        index = np.arange(self.n_samples)
+        if kind == "interleaved":
+            return [index[s::n_subsets] for s in range(n_subsets)]
+        if kind == "contiguous":
+            return list(np.array_split(index, n_subsets))
+        raise SpaceIdInputError(f"subset kind: expected 'interleaved' or 'contiguous', got {kind!r}")
+
+    def residuals(self, theta: FloatArray, count: bool = True) -> FloatArray:
+        """``predicted - measured`` (3T,), rad/s, at one ``theta`` (k,)."""
+        return (self.predict(theta, count=count)[0] - self.measured).ravel()
+
+    def jacobian(self, theta: FloatArray, count: bool = True) -> FloatArray:
+        """``d predicted / d theta`` (3T, k) at ``theta`` (k,), analytic; counted as k evaluations."""
+        theta = np.asarray(theta, dtype=float)
+        base10, payload10 = self.parameters.composite(theta)
+        d_base, d_payload = self.parameters.composite_jacobian(theta)
+        j_base, j_payload = self.momentum.jacobian(base10[0], None if payload10 is None else payload10[0])
+        jac = j_base @ d_base
+        if j_payload is not None and d_payload is not None:
+            jac = jac + j_payload @ d_payload
+        if count:
+            self.n_model_samples += self.n_params * self.n_samples
+        return jac.reshape(-1, self.n_params)
+
+    # ------------------------------------------------------------------ information
+    def noise_std(self, theta: FloatArray) -> tuple[float, str]:
+        """The gyro noise std (rad/s) for the bound, and whether it was ``given`` or estimated from the ``residual``."""
+        if self.model.noise_std_rad_s is not None:
+            return float(self.model.noise_std_rad_s), "given"
+        residual = self.residuals(theta, count=False)
+        dof = max(residual.size - self.n_params, 1)
+        return float(np.sqrt(residual @ residual / dof)), "residual"
+
+    def fisher(self, theta: FloatArray, noise_std_rad_s: float | None = None) -> FloatArray:
+        """Fisher information (k, k) of the log about ``theta`` for white gyro noise (per-sample std)."""
+        sigma = self.noise_std(theta)[0] if noise_std_rad_s is None else noise_std_rad_s
+        jac = self.jacobian(theta, count=False)
+        return (jac.T @ jac) / (sigma * sigma)
+
+    def crlb_std(self, theta: FloatArray, noise_std_rad_s: float | None = None) -> FloatArray:
+        """Cramér-Rao standard deviations (k,) at ``theta``; ``inf`` in directions the log does not inform."""
+        width = self.parameters.width
+        scaled = self.fisher(theta, noise_std_rad_s) * np.outer(width, width)  # rank decisions in range units
+        return cramer_rao_std(scaled) * width
+
+    # ------------------------------------------------------------------ result
+    def make_estimate(
+        self,
+        theta: FloatArray,
+        *,
+        estimator: str,
+        options: dict[str, Any],
+        seed: int | None,
+        cost_history: FloatArray | list[float],
+        wall_time_s: float,
+        extra: dict[str, Any] | None = None,
+    ) -> Estimate:
+        """Wrap ``theta`` as an :class:`Estimate`: bound, identifiability, derived physical quantities."""
+        theta = np.asarray(theta, dtype=float).copy()
+        params = self.parameters
+        sigma, source = self.noise_std(theta)
+        width = params.width
+        scaled = self.fisher(theta, sigma) * np.outer(width, width)
+        std = cramer_rao_std(scaled) * width
+        identifiable = std < IDENTIFIABLE_FRACTION * width
+        messages = [
+            f"insufficient excitation: {name} is not identifiable from this log "
+            f"(Cramér-Rao std {'unbounded' if not np.isfinite(s) else f'{s:.3g}'} > {IDENTIFIABLE_FRACTION:g} x its search range {w:.3g})"
+            for name, s, w, ok in zip(params.names, std, width, identifiable, strict=True)
+            if not ok
+        ]
+        physical, physical_std = _derived_with_std(params, theta, scaled, width, identifiable)
+        return Estimate(
+            estimator=estimator,
+            options=options,
+            seed=seed,
+            parameterisation=params.name,
+            names=tuple(params.names),
+            theta=theta,
+            theta_std=std,
+            identifiable=identifiable,
+            insufficient_excitation=messages,
+            physical=physical,
+            physical_std=physical_std,
+            cost=float(self.cost(theta, count=False)[0]),
+            noise_std_rad_s=sigma,
+            noise_source=source,
+            cost_history=np.asarray(cost_history, dtype=float),
+            n_evaluations=self.n_evaluations,
+            n_model_samples=self.n_model_samples,
+            wall_time_s=float(wall_time_s),
+            n_samples=self.n_samples,
+            extra=dict(extra or {}),
+        )
+
+
+def _derived_with_std(
+    params: Parameterisation, theta: FloatArray, scaled_fisher: FloatArray, width: FloatArray, identifiable: NDArray[np.bool_]
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Physical quantities and their std by the delta method (central differences in range units).
+
+    A quantity that depends on a non-identifiable parameter is reported as ``None`` (value and std).
+    """
+    values = params.physical(theta)
+    keys = list(values)
+    flat = [np.atleast_1d(np.asarray(values[k], dtype=float)).ravel() for k in keys]
+    sizes = [f.size for f in flat]
+    step = 1e-6
+    columns = []
+    for j in range(len(theta)):
+        delta = np.zeros_like(theta)
+        delta[j] = step * width[j]
+        plus = np.concatenate([np.atleast_1d(np.asarray(params.physical(theta + delta)[k], dtype=float)).ravel() for k in keys])
+        minus = np.concatenate([np.atleast_1d(np.asarray(params.physical(theta - delta)[k], dtype=float)).ravel() for k in keys])
+        columns.append((plus - minus) / (2.0 * step))  # per unit of the scaled parameter
+    d_scaled = np.column_stack(columns)  # (n_derived, k)
+    # marginal covariance of the identifiable parameters (pseudo-inverse: uninformed directions dropped)
+    cov = np.linalg.pinv(scaled_fisher, rcond=1e-9, hermitian=True)[np.ix_(identifiable, identifiable)]
+    d_informed = d_scaled[:, identifiable]
+    std_flat = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", d_informed, cov, d_informed), 0.0))
+    scale = np.abs(d_scaled).max(axis=1, keepdims=True) + 1e-300
+    depends_on_unidentified = (np.abs(d_scaled[:, ~identifiable]) > 1e-9 * scale).any(axis=1)
+    physical: dict[str, Any] = {}
+    physical_std: dict[str, Any] = {}
+    offset = 0
+    for key, size, value in zip(keys, sizes, flat, strict=True):
+        part = slice(offset, offset + size)
+        offset += size
+        shape = np.shape(values[key])
+        if depends_on_unidentified[part].any():
+            physical[key], physical_std[key] = None, None
+            continue
+        physical[key] = float(value[0]) if shape == () else value.reshape(shape)
+        physical_std[key] = float(std_flat[part][0]) if shape == () else std_flat[part].reshape(shape)
+    return physical, physical_std
