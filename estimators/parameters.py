@@ -40,7 +40,18 @@ from spaceid_gym.sim.mission import FuelSchedule
 FloatArray = NDArray[np.float64]
 
 #: names of the 10 inertial parameters about a frame origin (pinocchio order)
-PARAMS10_NAMES = ("mass_kg", "mcx_kgm", "mcy_kgm", "mcz_kgm", "ixx_kgm2", "ixy_kgm2", "iyy_kgm2", "ixz_kgm2", "iyz_kgm2", "izz_kgm2")
+PARAMS10_NAMES = (
+    "mass_kg",
+    "mcx_kgm",
+    "mcy_kgm",
+    "mcz_kgm",
+    "ixx_kgm2",
+    "ixy_kgm2",
+    "iyy_kgm2",
+    "ixz_kgm2",
+    "iyz_kgm2",
+    "izz_kgm2",
+)
 
 
 class Parameterisation(ABC):
@@ -207,7 +218,11 @@ class PayloadParameters(Parameterisation):
 
 
 #: the built-in parameterisations, by name
-PARAMETERISATIONS: dict[str, type[Parameterisation]] = {"fuel": FuelParameters, "base": BaseParameters, "payload": PayloadParameters}
+PARAMETERISATIONS: dict[str, type[Parameterisation]] = {
+    "fuel": FuelParameters,
+    "base": BaseParameters,
+    "payload": PayloadParameters,
+}
 
 
 def make_parameterisation(name: str, robot: Robot, **options: Any) -> Parameterisation:

@@ -57,7 +57,9 @@ class IdentificationModel:
         **param_options: Any,
     ) -> None:
         self.robot = robot if isinstance(robot, Robot) else load_robot(robot)
-        self.parameters = params if isinstance(params, Parameterisation) else make_parameterisation(params, self.robot, **param_options)
+        self.parameters = (
+            params if isinstance(params, Parameterisation) else make_parameterisation(params, self.robot, **param_options)
+        )
         if noise_std_rad_s is not None and not (np.isfinite(noise_std_rad_s) and noise_std_rad_s > 0.0):
             raise SpaceIdInputError(f"noise_std_rad_s: expected a positive number (rad/s) or None, got {noise_std_rad_s!r}")
         self.noise_std_rad_s = noise_std_rad_s

@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+from agents.excitation import FourierExcitation
+from spaceid_gym.datasets import simulate_episode
+from spaceid_gym.log import MeasurementLog
 from spaceid_gym.robots import Robot, load_robot
 
 #: the shared data folder next to the repository (UR5 logs, design notes)
@@ -20,3 +25,31 @@ def paper6() -> Robot:
 @pytest.fixture(scope="session")
 def quick3() -> Robot:
     return load_robot("quick3")
+
+
+@dataclass(frozen=True)
+class FuelEpisode:
+    """A simulated identification window with known fuel parameters (paper6, Fourier excitation, documented noise)."""
+
+    robot: Robot
+    log: MeasurementLog
+    theta_true: np.ndarray  # [mdf kg, bf m (3)]
+    noise_std_rad_s: float  # gyro noise per sample
+
+
+def _fuel_episode(robot: Robot, duration_s: float, seed: int) -> FuelEpisode:
+    theta = np.array([60.0, 0.25, -0.2, 0.1])
+    env = simulate_episode(robot, duration_s, theta[0], theta[1:], FourierExcitation(robot.n_joints, seed=seed), seed=seed)
+    return FuelEpisode(robot, env.measurement_log(), theta, env.sensors.gyro_std_rad_s(env.control_period_s))
+
+
+@pytest.fixture(scope="session")
+def fuel_episode(paper6: Robot) -> FuelEpisode:
+    """60 s at 50 Hz (3001 samples), mdf 60 kg, tank (0.25, -0.2, 0.1) m."""
+    return _fuel_episode(paper6, 60.0, seed=0)
+
+
+@pytest.fixture(scope="session")
+def short_fuel_episode(paper6: Robot) -> FuelEpisode:
+    """As :func:`fuel_episode` but 20 s (1001 samples), for quick checks."""
+    return _fuel_episode(paper6, 20.0, seed=1)

@@ -110,9 +110,9 @@ class MomentumModel:
             is ``None`` without a payload.
         """
         base = np.asarray(base10, dtype=float)
-        arm10 = np.concatenate(
-            (np.full((self.n_samples, 1), self.arm_mass_kg), self._first_moment, self._inertia6), axis=1
-        )[samples]
+        arm10 = np.concatenate((np.full((self.n_samples, 1), self.arm_mass_kg), self._first_moment, self._inertia6), axis=1)[
+            samples
+        ]
         composite10 = arm10 + base
         momentum = self._momentum[samples]
         if payload10 is not None:
