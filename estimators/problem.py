@@ -171,6 +171,13 @@ class IdentificationProblem:
         scaled = self.fisher(theta, noise_std_rad_s) * np.outer(width, width)  # rank decisions in range units
         return cramer_rao_std(scaled) * width
 
+    def crlb_physical_std(self, theta: FloatArray, noise_std_rad_s: float | None = None) -> dict[str, Any]:
+        """Cramér-Rao std of the physical quantities (``base_mass_kg``, ...) at ``theta`` (delta method)."""
+        width = self.parameters.width
+        scaled = self.fisher(theta, noise_std_rad_s) * np.outer(width, width)
+        identifiable = np.ones(self.n_params, dtype=bool)
+        return _derived_with_std(self.parameters, np.asarray(theta, dtype=float), scaled, width, identifiable)[1]
+
     # ------------------------------------------------------------------ result
     def make_estimate(
         self,

@@ -29,6 +29,17 @@ def _vector3(text: str) -> np.ndarray:
     return values
 
 
+def _numbers(text: str) -> np.ndarray:
+    """Parse comma-separated numbers for --lower/--upper."""
+    try:
+        values = np.array([float(x) for x in text.split(",")])
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {text!r}") from None
+    if not np.all(np.isfinite(values)):
+        raise argparse.ArgumentTypeError(f"expected finite numbers, got {text!r}")
+    return values
+
+
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="spaceid", description="Identify robot inertial parameters from motion data.")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -45,6 +56,35 @@ def _parser() -> argparse.ArgumentParser:
     sim.add_argument("--noise-free", action="store_true", help="exact measurements")
     sim.add_argument("--out", type=Path, required=True, help="dataset folder to write")
 
+    ident = sub.add_parser("identify", help="identify parameters from a log and write an estimate file")
+    ident.add_argument("--robot", required=True, help="URDF path (e.g. a dataset's robot.urdf) or shipped robot name")
+    ident.add_argument("--log", type=Path, required=True, help="log.csv (t_s, q_*, dq_*, omega_* columns)")
+    ident.add_argument("--params", default="fuel", help="unknowns: fuel (default), base or payload")
+    ident.add_argument(
+        "--estimator", default="hybrid", help="registered estimator, optionally name[key=value,...] (default hybrid)"
+    )
+    ident.add_argument("--seed", type=int, default=0, help="seed of the estimator's generator")
+    ident.add_argument("--lower", type=_numbers, default=None, help="lower bounds, comma-separated, one per unknown")
+    ident.add_argument("--upper", type=_numbers, default=None, help="upper bounds, comma-separated, one per unknown")
+    ident.add_argument(
+        "--noise-std", type=float, default=None, help="gyro noise std per sample, rad/s (default: from the residual)"
+    )
+    ident.add_argument("--out", type=Path, required=True, help="estimate JSON file to write")
+
+    ev = sub.add_parser("evaluate", help="evaluate estimators episode by episode against the truth and the Cramér-Rao bound")
+    ev.add_argument("--robot", default="paper6")
+    ev.add_argument("--estimators", default="improved-pso,pso,lm,hybrid,nn", help="comma-separated specs name[key=value,...]")
+    ev.add_argument("--settings", type=int, default=200, help="number of true settings (default 200)")
+    ev.add_argument("--seed", type=int, default=0)
+    ev.add_argument("--duration", type=float, default=60.0, help="window length, s (default 60)")
+    ev.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
+    ev.add_argument(
+        "--budget-reference",
+        default="improved-pso",
+        help="estimators with max_evaluations get this one's evaluations ('' for none)",
+    )
+    ev.add_argument("--out", type=Path, required=True, help="output folder")
+
     demo = sub.add_parser("demo", help="the whole loop available so far on the built-in robot")
     demo.add_argument("--out", type=Path, default=Path("demo-output"), help="output folder (default demo-output)")
     demo.add_argument("--robot", default="paper6")
@@ -58,6 +98,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         if args.command == "simulate":
             _simulate(args)
+        elif args.command == "identify":
+            _identify(args)
+        elif args.command == "evaluate":
+            _evaluate(args)
         elif args.command == "demo":
             from spaceid_gym.demo import run_demo
 
@@ -101,6 +145,48 @@ def _simulate(args: argparse.Namespace) -> None:
         f"wrote {dataset.path}/ ({dataset.log.n_samples} samples, {dataset.log.duration_s:.1f} s, "
         f"{time.perf_counter() - start:.2f} s wall): base mass {truth['base_mass_kg']:.2f} kg, "
         f"fuel consumed {truth['fuel_consumed_kg']:.2f} kg, tank {json.dumps([round(x, 4) for x in truth['tank_position_m']])} m"
+    )
+
+
+def _identify(args: argparse.Namespace) -> None:
+    from estimators.evaluation import estimator_from_spec
+    from estimators.problem import IdentificationModel
+    from spaceid_gym.log import MeasurementLog
+    from spaceid_gym.robots import load_robot
+
+    robot = load_robot(args.robot)
+    estimator = estimator_from_spec(args.estimator)
+    estimator.seed = args.seed
+    bounds = {k: v for k, v in (("lower", args.lower), ("upper", args.upper)) if v is not None}
+    model = IdentificationModel(robot, args.params, noise_std_rad_s=args.noise_std, **bounds)
+    log = MeasurementLog.from_csv(args.log, n_joints=robot.n_joints)
+    estimate = estimator.fit(model, log)
+    estimate.write_json(args.out)
+    print(f"wrote {args.out} ({estimate.estimator}, {estimate.n_evaluations:.0f} evaluations, {estimate.wall_time_s:.2f} s)")
+    for name, value, std, ok in zip(estimate.names, estimate.theta, estimate.theta_std, estimate.identifiable, strict=True):
+        print(f"  {name:>18} = {value:.6g} +- {std:.3g}" if ok else f"  {name:>18}: not identifiable from this log")
+    for message in estimate.insufficient_excitation:
+        print(message)
+
+
+def _evaluate(args: argparse.Namespace) -> None:
+    from estimators.evaluation import draw_settings, parse_estimator_specs, run_evaluation, settings_info, write_results
+    from spaceid_gym.robots import load_robot
+
+    if args.jobs < 1:
+        raise SpaceIdInputError(f"--jobs: expected at least 1, got {args.jobs}")
+    if not (np.isfinite(args.duration) and args.duration > 0):
+        raise SpaceIdInputError(f"--duration: expected a positive number of seconds, got {args.duration!r}")
+    specs = parse_estimator_specs(args.estimators)
+    settings = draw_settings(load_robot(args.robot), args.settings, args.seed)
+    start = time.perf_counter()
+    rows = run_evaluation(
+        args.robot, specs, settings, budget_reference=args.budget_reference or None, duration_s=args.duration, jobs=args.jobs
+    )
+    paths = write_results(args.out, rows, settings_info(args.robot, settings, args.seed, args.duration, 0.02))
+    print(paths["table"].read_text())
+    print(
+        f"{len(settings)} settings x {len(specs)} estimators in {time.perf_counter() - start:.0f} s; wrote {', '.join(p.name for p in paths.values())}"
     )
 
 

@@ -105,7 +105,12 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     ``sensors`` (:class:`~spaceid_gym.sim.sensors.SensorModel`, ``None`` for defaults, or
     ``"noise_free"``), ``fuel_schedule`` (:class:`~spaceid_gym.sim.mission.FuelSchedule`),
     ``tank_position_m`` (fixed tank, default drawn per satellite), ``reward_weights``
-    (:class:`RewardWeights`), ``render_mode`` (``"rgb_array"`` or ``None``).
+    (:class:`RewardWeights`), ``render_mode`` (``"rgb_array"`` or ``None``), ``estimator`` (a
+    registered name such as ``"improved-pso"`` or an :class:`~estimators.base.Estimator`: it is fitted
+    on the window's log at the window's last step, whose ``info`` then holds ``estimate`` (the
+    estimate file's content) and ``estimate_errors`` (``M``, ``r``, ``Ixx``, ``Iyy``, ``Izz`` in %,
+    ``mdf`` in kg, ``bf`` in mm, as in :mod:`estimators.evaluation`)), ``identify_after_steps``
+    (window length in steps for the estimator; default the ``max_episode_steps`` of ``gym.make``).
     The measurement log of the current episode: :meth:`measurement_log`.
     """
 
@@ -120,6 +125,8 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         tank_position_m: FloatArray | None = None,
         reward_weights: RewardWeights | None = None,
         render_mode: str | None = None,
+        estimator: Any = None,
+        identify_after_steps: int | None = None,
     ) -> None:
         self.robot = robot if isinstance(robot, Robot) else load_robot(robot)
         if not (np.isfinite(control_period_s) and control_period_s > 0.0):
@@ -158,6 +165,15 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         self._fuel_consumed_kg = 0.0
         self._episode = -1
         self._renderer: Any = None
+        self._estimator = None
+        if estimator is not None:
+            from estimators.registry import make_estimator  # estimators build on this package: imported on demand
+
+            self._estimator = make_estimator(estimator)
+        if identify_after_steps is not None and identify_after_steps < 1:
+            raise SpaceIdInputError(f"identify_after_steps: expected a positive number of steps, got {identify_after_steps!r}")
+        self._identify_after_steps = identify_after_steps
+        self._steps = 0
 
     # ------------------------------------------------------------------ gym API
     def reset(
@@ -195,6 +211,11 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         self._fisher, self._log_det_fisher = np.eye(4), 0.0  # prior information: one prior range per parameter
         self._fisher_update(state.composite_inertia, state.v_base_body)
         self._truth = _truth_info(self._fuel_consumed_kg, self._tank, base, self._episode)
+        self._steps = 0
+        if self._estimator is not None and self._window_steps() is None:
+            raise SpaceIdInputError(
+                "estimator: the episode length is unknown; create the env with gym.make (max_episode_steps) or pass identify_after_steps"
+            )
         return self._observation(self._recorder.record(state)), {"truth": dict(self._truth)}
 
     def step(self, action: NDArray[np.float32]) -> tuple[NDArray[np.float32], float, bool, bool, dict[str, Any]]:
@@ -221,6 +242,9 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             "penalty_attitude": penalty_attitude,
             "log_det_fisher": self._log_det_fisher,
         }
+        self._steps += 1
+        if self._estimator is not None and self._steps == self._window_steps():
+            info.update(self._identify())
         return self._observation(sample), gain - penalty_limit - penalty_attitude, False, False, info
 
     def render(self) -> NDArray[np.uint8] | None:
@@ -260,6 +284,24 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         return cramer_rao_std(self._fisher - np.eye(4)) * self._param_scale
 
     # ------------------------------------------------------------------ internals
+    def _window_steps(self) -> int | None:
+        """Steps of an identification window: ``identify_after_steps``, else the registered time limit."""
+        if self._identify_after_steps is not None:
+            return self._identify_after_steps
+        return None if self.spec is None else self.spec.max_episode_steps
+
+    def _identify(self) -> dict[str, Any]:
+        """Run the estimator on the episode's window: ``estimate`` (the estimate file's dict) and ``estimate_errors``."""
+        from estimators.evaluation import quantity_errors
+        from estimators.problem import IdentificationModel
+
+        assert self._estimator is not None
+        model = IdentificationModel(self.robot, "fuel")
+        estimate = self._estimator.fit(model, self.measurement_log())
+        theta_true = np.concatenate(([self._fuel_consumed_kg], self._tank))
+        errors = quantity_errors(model.parameters.physical(estimate.theta), model.parameters.physical(theta_true))
+        return {"estimate": estimate.to_dict(), "estimate_errors": errors}
+
     def _fisher_update(self, composite: Any, twist: FloatArray) -> float:
         """Add one gyro sample's information; return the gain ``0.5 (log det F_t - log det F_{t-1})``."""
         jac = twist_parameter_jacobian(composite.inverse(), twist, self._directions)[3:]  # d omega / d theta_scaled
