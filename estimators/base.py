@@ -99,6 +99,10 @@ class Estimator(ABC):
             extra=result.extra,
         )
 
+    def search(self, problem: IdentificationProblem, rng: np.random.Generator) -> SearchResult:
+        """The bare search on a set-up problem (no timing, no estimate): for composing estimators (e.g. ``hybrid``)."""
+        return self._search(problem, rng)
+
     @abstractmethod
     def _search(self, problem: IdentificationProblem, rng: np.random.Generator) -> SearchResult:
         """Find the parameters minimising ``problem.cost``; all randomness from ``rng``."""

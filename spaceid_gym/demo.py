@@ -6,8 +6,11 @@
    (eq. 8) evaluated with the nominal full-tank base and with the true base: the residual of the
    true base sits at the gyro noise floor, the nominal one does not. That gap is what the
    estimators identify.
-3. Compare excitations by the Cramér-Rao bound they leave on the fuel parameters.
-4. Save an overlay plot, a rendered frame and ``summary.json``.
+3. Identify the fuel state (mdf, tank position) from the reloaded log with the default estimator
+   (``hybrid``: improved PSO, then Levenberg-Marquardt), write ``run1/estimate.json`` and compare it
+   with ``truth.json`` key by key, in units of the estimate's own Cramér-Rao standard deviation.
+4. Compare excitations by the Cramér-Rao bound they leave on the fuel parameters.
+5. Save an overlay plot, a rendered frame and ``summary.json``.
 """
 
 from __future__ import annotations
@@ -23,7 +26,7 @@ from matplotlib.figure import Figure
 from agents.excitation import FourierExcitation
 from spaceid_gym.datasets import simulate_episode, write_episode_dataset
 from spaceid_gym.envs.render import RobotRenderer, base_half_extents_from_inertia
-from spaceid_gym.log import MeasurementLog
+from spaceid_gym.log import Dataset, MeasurementLog
 from spaceid_gym.physics.inertia import RigidBodyInertia
 from spaceid_gym.physics.momentum import base_rate_from_joint_motion
 from spaceid_gym.robots import load_robot, robot_from_urdf_text
@@ -38,13 +41,13 @@ def run_demo(out: Path, robot_name: str = "paper6", seed: int = 3) -> dict[str, 
     """Run the demonstration, write its files under ``out`` and return the summary."""
     out.mkdir(parents=True, exist_ok=True)
     robot = load_robot(robot_name)
-    print(f"[1/4] simulating {DURATION_S:.0f} s of {robot.name} (fuel consumed {FUEL_CONSUMED_KG} kg, tank {TANK_POSITION_M} m)")
+    print(f"[1/5] simulating {DURATION_S:.0f} s of {robot.name} (fuel consumed {FUEL_CONSUMED_KG} kg, tank {TANK_POSITION_M} m)")
     env = simulate_episode(robot, DURATION_S, FUEL_CONSUMED_KG, TANK_POSITION_M, FourierExcitation(robot.n_joints, seed), seed)
     dataset = write_episode_dataset(out / "run1", env, {"seed": seed, "excitation": {"kind": "fourier", "seed": seed}})
     assert dataset.truth is not None
     print(f"      wrote {dataset.path}/log.csv, robot.urdf, truth.json ({dataset.log.n_samples} samples)")
 
-    print("[2/4] model vs measurement: base rate predicted from joint motion (eq. 8)")
+    print("[2/5] model vs measurement: base rate predicted from joint motion (eq. 8)")
     comparison = _compare_with_model(dataset.log, dataset.robot_urdf_path.read_text(), dataset.truth)
     sigma = comparison["gyro_noise_std_rad_s"]
     print(
@@ -59,7 +62,9 @@ def run_demo(out: Path, robot_name: str = "paper6", seed: int = 3) -> dict[str, 
         )
     _plot_overlay(out / "overlay.png", dataset.log, comparison.pop("_predictions"), comparison["averaged_noise_std_rad_s"])
 
-    print("[3/4] excitation: Cramér-Rao bound on the fuel parameters after one window")
+    print("[3/5] identification: fuel state from the reloaded log (estimator 'hybrid')")
+    identification = _identify(dataset)
+    print("[4/5] excitation: Cramér-Rao bound on the fuel parameters after one window")
     excitations = {
         "fourier (5 harmonics)": FourierExcitation(robot.n_joints, seed),
         "one joint (joint 2)": _single_joint(robot.n_joints, 1),
@@ -72,16 +77,48 @@ def run_demo(out: Path, robot_name: str = "paper6", seed: int = 3) -> dict[str, 
         information[label] = {"fuel_consumed_std_kg": float(std[0]), "tank_position_std_m": std[1:].tolist()}
         print(f"      {label:22s} std(mdf) {std[0]:8.3f} kg   std(bf) {np.array2string(std[1:], precision=4)} m")
 
-    print("[4/4] rendering the final pose")
+    print("[5/5] rendering the final pose")
     renderer = RobotRenderer(
         env.simulator.model, base_half_extents_from_inertia(robot.base_full.mass_kg, robot.base_full.inertia_com_kgm2)
     )
     frame = renderer.render(env.simulator.state.pinocchio_configuration(), info_text=f"{robot.name}: end of the window")
     _save_png(out / "frame.png", frame)
-    summary = {"dataset": str(dataset.path), "comparison": comparison, "cramer_rao": information}
+    summary = {
+        "dataset": str(dataset.path),
+        "comparison": comparison,
+        "identification": identification,
+        "cramer_rao": information,
+    }
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
     print(f"done: {out}/overlay.png, {out}/frame.png, {out}/summary.json")
     return summary
+
+
+def _identify(dataset: Dataset) -> dict[str, Any]:
+    """Fit the default estimator on the dataset as a user would (URDF + log only) and hold it against the truth."""
+    from estimators.problem import IdentificationModel
+    from estimators.registry import make_estimator
+
+    robot = robot_from_urdf_text(dataset.robot_urdf_path.read_text(), "robot.urdf")
+    estimate = make_estimator("hybrid", seed=0).fit(IdentificationModel(robot, "fuel"), dataset.log)
+    estimate.write_json(dataset.path / "estimate.json")
+    print(f"      wrote {dataset.path}/estimate.json ({estimate.n_evaluations:.0f} evaluations, {estimate.wall_time_s:.2f} s)")
+    assert dataset.truth is not None
+    doc = estimate.to_dict()
+    result: dict[str, Any] = {
+        "estimate": str(dataset.path / "estimate.json"),
+        "wall_time_s": estimate.wall_time_s,
+        "errors_in_std": {},
+    }
+    for key in ("fuel_consumed_kg", "tank_position_m", "base_mass_kg", "base_com_m"):
+        value, std, true = np.asarray(doc[key]), np.asarray(doc[f"{key}_std"]), np.asarray(dataset.truth[key])
+        in_std = (value - true) / std
+        result["errors_in_std"][key] = in_std.tolist()
+        print(
+            f"      {key:17s} estimate {np.array2string(value, precision=4)} +- {np.array2string(std, precision=2)}, "
+            f"true {np.array2string(true, precision=4)} ({np.array2string(in_std, precision=2)} std)"
+        )
+    return result
 
 
 def _compare_with_model(log: MeasurementLog, urdf_text: str, truth: dict[str, Any]) -> dict[str, Any]:

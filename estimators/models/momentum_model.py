@@ -120,14 +120,14 @@ class MomentumModel:
             payload = np.asarray(payload10, dtype=float)
             composite10 = composite10 + to_base @ payload
             momentum = momentum + momentum_map @ payload
-        inertia = spatial_inertia_matrix(composite10)  # (T, 6, 6)
-        twist = -np.linalg.solve(inertia, momentum[..., None])[..., 0]  # (T, 6)
+        inverse = np.linalg.inv(spatial_inertia_matrix(composite10))  # (T, 6, 6)
+        twist = -np.einsum("tab,tb->ta", inverse, momentum)  # (T, 6)
         basis_twist = np.einsum("kab,tb->tak", SPATIAL_INERTIA_BASIS, twist)  # (T, 6, 10): B_k v
-        d_base = -np.linalg.solve(inertia, basis_twist)
+        angular = inverse[:, 3:]  # only omega is measured
+        d_base = -angular @ basis_twist
         if payload10 is None:
-            return d_base[:, 3:], None
-        d_payload = -np.linalg.solve(inertia, basis_twist @ to_base + momentum_map)
-        return d_base[:, 3:], d_payload[:, 3:]
+            return d_base, None
+        return d_base, -angular @ (basis_twist @ to_base + momentum_map)
 
     # ------------------------------------------------------------------ internals
     def _payload_maps(self) -> tuple[FloatArray, FloatArray]:
