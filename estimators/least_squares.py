@@ -21,6 +21,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares
 
 from estimators.base import Estimator, SearchResult
+from estimators.options import finite_vector, positive_option
 from estimators.problem import IdentificationProblem
 from spaceid_gym.errors import SpaceIdInputError
 
@@ -32,27 +33,6 @@ METHODS = ("trf", "dogbox", "lm")
 #: the default start: the nominal, with every coordinate closer than this fraction of the width to a bound
 #: moved to that distance (the fuel nominal mdf = 0 sits on its bound, where the tank position has no effect)
 INTERIOR_FRACTION = 0.1
-
-
-def positive_option(name: str, value: Any, *, integer: bool = False) -> Any:
-    """``value`` if it is a finite number > 0 (an int if ``integer``), else :class:`SpaceIdInputError` naming ``name``."""
-    kind = "a positive integer" if integer else "a positive number"
-    numeric = isinstance(value, (int, np.integer)) if integer else isinstance(value, (int, float, np.integer, np.floating))
-    if isinstance(value, bool) or not numeric or not np.isfinite(value) or value <= 0:
-        raise SpaceIdInputError(f"{name}: expected {kind}, got {value!r}")
-    return int(value) if integer else float(value)
-
-
-def finite_vector(name: str, value: ArrayLike, names: tuple[str, ...] | None = None) -> FloatArray:
-    """``value`` as a vector of finite floats (of one entry per parameter in ``names`` if given), else :class:`SpaceIdInputError`."""
-    try:
-        vector = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        vector = np.array([np.nan])
-    expected = "finite numbers" if names is None else f"{len(names)} finite numbers ({', '.join(names)})"
-    if vector.ndim != 1 or not np.all(np.isfinite(vector)) or (names is not None and len(vector) != len(names)):
-        raise SpaceIdInputError(f"{name}: expected {expected}, got {value!r}")
-    return vector
 
 
 class _IterationLimit(Exception):

@@ -31,7 +31,7 @@ from scipy.optimize import differential_evolution
 from scipy.stats import qmc
 
 from estimators.base import Estimator, SearchResult
-from estimators.least_squares import positive_option
+from estimators.options import positive_option
 from estimators.problem import IdentificationProblem
 from spaceid_gym.errors import SpaceIdInputError
 

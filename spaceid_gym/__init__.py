@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from gymnasium.envs.registration import register, registry
 
+from spaceid_gym.envs.free_floating import WINDOW_STEPS
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.robots import Robot, available_robots, load_robot
 
@@ -17,5 +18,5 @@ if "FreeFloatingID-v0" not in registry:
     register(
         id="FreeFloatingID-v0",
         entry_point="spaceid_gym.envs.free_floating:FreeFloatingIDEnv",
-        max_episode_steps=3000,
+        max_episode_steps=WINDOW_STEPS,
     )

@@ -29,3 +29,14 @@ def test_demo_runs(tmp_path: Path) -> None:
     )
     assert result.returncode == 0, result.stderr
     assert {"overlay.png", "frame.png", "summary.json", "run1"} <= {p.name for p in tmp_path.iterdir()}
+
+
+def test_identify_fuel_runs() -> None:
+    result = subprocess.run(
+        [sys.executable, str(EXAMPLES / "identify_fuel.py"), "--robot", "quick3", "--duration", "20"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert result.returncode == 0, result.stderr
+    assert "hybrid: mdf" in result.stdout and "env loop (hybrid)" in result.stdout

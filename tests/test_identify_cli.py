@@ -113,7 +113,7 @@ def test_evaluate_writes_tables_and_plots(tmp_path: Path) -> None:
 
 
 def test_env_runs_the_estimator_at_the_window_end() -> None:
-    env = gym.make("FreeFloatingID-v0", robot="paper6", estimator="lm", max_episode_steps=400)
+    env = gym.make("FreeFloatingID-v0", robot="paper6", estimator="lm", max_episode_steps=400, identify_after_steps=400)
     env.reset(seed=0, options={"fuel_consumed_kg": 80.0, "tank_position_m": [0.3, -0.25, 0.2]})
     action = np.full(6, 0.8, dtype=np.float32)
     for k in range(400):
@@ -127,9 +127,10 @@ def test_env_runs_the_estimator_at_the_window_end() -> None:
     env.close()
 
 
-def test_env_without_a_window_length_refuses_an_estimator() -> None:
+def test_env_rejects_a_bad_window_and_an_unknown_estimator() -> None:
     from spaceid_gym.envs import FreeFloatingIDEnv
 
-    env = FreeFloatingIDEnv("quick3", estimator="lm")
-    with pytest.raises(SpaceIdInputError, match="episode length is unknown"):
-        env.reset(seed=0)
+    with pytest.raises(SpaceIdInputError, match="identify_after_steps: expected a positive number of steps"):
+        FreeFloatingIDEnv("quick3", estimator="lm", identify_after_steps=0)
+    with pytest.raises(SpaceIdInputError, match="unknown estimator 'simplex'"):
+        FreeFloatingIDEnv("quick3", estimator="simplex")

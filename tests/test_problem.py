@@ -155,7 +155,7 @@ class _Nominal(Estimator):
 
 
 def test_registry_and_protocol(short_fuel_episode) -> None:
-    with pytest.raises(SpaceIdInputError, match="unknown estimator 'nope'; available: .*improved-pso"):
+    with pytest.raises(SpaceIdInputError, match=r"unknown estimator 'nope'; available: .*improved-pso"):
         make_estimator("nope")
     register_estimator("nominal-test", _Nominal, overwrite=True)
     assert "nominal-test" in available_estimators()

@@ -26,6 +26,10 @@ from spaceid_gym.sim.simulator import FreeFloatingSimulator
 FloatArray = NDArray[np.float64]
 
 
+#: the default identification window: 3000 steps, 60 s at 50 Hz (the registered ``max_episode_steps``)
+WINDOW_STEPS = 3000
+
+
 @dataclass(frozen=True)
 class RewardWeights:
     """Weights of the reward's penalty terms (see :class:`FreeFloatingIDEnv`, *Rewards*).
@@ -110,7 +114,9 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     on the window's log at the window's last step, whose ``info`` then holds ``estimate`` (the
     estimate file's content) and ``estimate_errors`` (``M``, ``r``, ``Ixx``, ``Iyy``, ``Izz`` in %,
     ``mdf`` in kg, ``bf`` in mm, as in :mod:`estimators.evaluation`)), ``identify_after_steps``
-    (window length in steps for the estimator; default the ``max_episode_steps`` of ``gym.make``).
+    (window length in steps after which the estimator runs; default :data:`WINDOW_STEPS`, the registered
+    ``max_episode_steps``: pass the same number to both when changing the window, as the time limit
+    wrapper does not tell the env).
     The measurement log of the current episode: :meth:`measurement_log`.
     """
 
@@ -126,7 +132,7 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         reward_weights: RewardWeights | None = None,
         render_mode: str | None = None,
         estimator: Any = None,
-        identify_after_steps: int | None = None,
+        identify_after_steps: int = WINDOW_STEPS,
     ) -> None:
         self.robot = robot if isinstance(robot, Robot) else load_robot(robot)
         if not (np.isfinite(control_period_s) and control_period_s > 0.0):
@@ -170,7 +176,7 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             from estimators.registry import make_estimator  # estimators build on this package: imported on demand
 
             self._estimator = make_estimator(estimator)
-        if identify_after_steps is not None and identify_after_steps < 1:
+        if identify_after_steps < 1:
             raise SpaceIdInputError(f"identify_after_steps: expected a positive number of steps, got {identify_after_steps!r}")
         self._identify_after_steps = identify_after_steps
         self._steps = 0
@@ -212,10 +218,6 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         self._fisher_update(state.composite_inertia, state.v_base_body)
         self._truth = _truth_info(self._fuel_consumed_kg, self._tank, base, self._episode)
         self._steps = 0
-        if self._estimator is not None and self._window_steps() is None:
-            raise SpaceIdInputError(
-                "estimator: the episode length is unknown; create the env with gym.make (max_episode_steps) or pass identify_after_steps"
-            )
         return self._observation(self._recorder.record(state)), {"truth": dict(self._truth)}
 
     def step(self, action: NDArray[np.float32]) -> tuple[NDArray[np.float32], float, bool, bool, dict[str, Any]]:
@@ -243,7 +245,7 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             "log_det_fisher": self._log_det_fisher,
         }
         self._steps += 1
-        if self._estimator is not None and self._steps == self._window_steps():
+        if self._estimator is not None and self._steps == self._identify_after_steps:
             info.update(self._identify())
         return self._observation(sample), gain - penalty_limit - penalty_attitude, False, False, info
 
@@ -284,12 +286,6 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         return cramer_rao_std(self._fisher - np.eye(4)) * self._param_scale
 
     # ------------------------------------------------------------------ internals
-    def _window_steps(self) -> int | None:
-        """Steps of an identification window: ``identify_after_steps``, else the registered time limit."""
-        if self._identify_after_steps is not None:
-            return self._identify_after_steps
-        return None if self.spec is None else self.spec.max_episode_steps
-
     def _identify(self) -> dict[str, Any]:
         """Run the estimator on the episode's window: ``estimate`` (the estimate file's dict) and ``estimate_errors``."""
         from estimators.evaluation import quantity_errors
