@@ -1,6 +1,11 @@
 """Identification models and estimators for spaceid-gym.
 
-So far: :class:`estimators.models.MomentumModel`, the batched identification model (base rate
-over a log for many parameter vectors). The estimator protocol and the estimators (improved PSO
-and the others) are the rest of the estimators issue.
+The data flow: :class:`~estimators.problem.IdentificationModel` (robot + unknowns) bound to a
+:class:`~spaceid_gym.log.MeasurementLog` gives an :class:`~estimators.problem.IdentificationProblem`
+(batched objective, analytic Jacobian, Cramér-Rao bound); an :class:`~estimators.base.Estimator`
+(``fit(model, log)``, options in the constructor) returns an :class:`~estimators.estimate.Estimate`.
+Estimators by name: :func:`~estimators.registry.make_estimator` (``pso``, ``improved-pso``, ``lm``,
+``hybrid``, ``nn``, ``de``, ``cma-es``, ``pyswarms-local``, and users' own via
+:func:`~estimators.registry.register_estimator`). :mod:`estimators.evaluation` runs them episode by
+episode against the truth and the bound.
 """

@@ -166,6 +166,7 @@ def evaluate_setting(job: _Job) -> list[dict[str, Any]]:
                 "n_evaluations": estimate.n_evaluations,
                 "wall_time_s": estimate.wall_time_s,
                 "cost_over_noise_variance": estimate.cost / sigma_true**2,
+                "n_residuals": 3 * problem.n_samples,
                 "cost_history": [c / sigma_true**2 for c in estimate.cost_history],
             }
         )
@@ -295,6 +296,9 @@ def write_results(out_dir: str | Path, rows: Sequence[dict[str, Any]], settings_
     summary = summarise(rows)
     paths = {
         "episodes": _write_csv(out / "episodes.csv", [{k: v for k, v in r.items() if k != "cost_history"} for r in rows]),
+        "histories": _atomic_text(
+            out / "histories.json", json.dumps([{k: r[k] for k in ("setting", "estimator", "cost_history")} for r in rows])
+        ),
         "summary_csv": _write_csv(out / "summary.csv", summary),
         "summary_json": _atomic_text(out / "summary.json", json.dumps({"settings": settings_info, "summary": summary}, indent=2)),
         "table": _atomic_text(out / "table.md", markdown_table(summary)),
@@ -329,21 +333,27 @@ def _plots(out: Path, rows: Sequence[dict[str, Any]]) -> dict[str, Path]:
 
     specs = list(dict.fromkeys(r["estimator"] for r in rows))
     paths = {}
-    fig, ax = plt.subplots(figsize=(7, 4.5))
+    # convergence in chi-square units above the best fit any estimator found on the same window
+    best = {}
+    for r in rows:
+        best[r["setting"]] = min(best.get(r["setting"], np.inf), r["cost_over_noise_variance"], *r["cost_history"])
+    fig, ax = plt.subplots(figsize=(8, 5))
     for spec in specs:
-        histories = [r["cost_history"] for r in rows if r["estimator"] == spec and len(r["cost_history"]) > 1]
-        if not histories:
+        mine = [r for r in rows if r["estimator"] == spec and len(r["cost_history"]) > 1]
+        if not mine:
             continue
-        length = min(len(h) for h in histories)
-        curves = np.array([h[:length] for h in histories])
-        median = np.median(curves, axis=0)
-        ax.plot(np.arange(1, length + 1), median, label=spec)
-        ax.fill_between(np.arange(1, length + 1), *np.percentile(curves, [25, 75], axis=0), alpha=0.15)
+        length = min(len(r["cost_history"]) for r in mine)
+        curves = np.array([(np.asarray(r["cost_history"][:length]) - best[r["setting"]]) * r["n_residuals"] for r in mine])
+        curves = np.maximum(curves, 1e-3)
+        generations = np.arange(1, length + 1)
+        ax.plot(generations, np.median(curves, axis=0), label=f"{spec} (median)")
+        ax.plot(generations, np.percentile(curves, 90, axis=0), ls=":", color=ax.lines[-1].get_color(), lw=0.8)
     ax.set_yscale("log")
+    ax.set_xlim(1, 60)
     ax.set_xlabel("iteration / generation")
-    ax.set_ylabel("best whole-log cost / gyro noise variance")
-    ax.set_title("Convergence (median and quartiles over settings)")
-    ax.legend(fontsize=8)
+    ax.set_ylabel("best whole-log cost above the window's best fit\n(chi-square units; dotted: 90th percentile)")
+    ax.set_title("Convergence over all settings (1 unit ~ 1 Cramér-Rao std from the optimum)")
+    ax.legend(fontsize=7, ncol=2)
     fig.tight_layout()
     paths["convergence"] = out / "convergence.png"
     fig.savefig(paths["convergence"], dpi=110)

@@ -1,4 +1,4 @@
-"""The ``spaceid`` command: simulate datasets and run the demonstration.
+"""The ``spaceid`` command: simulate datasets, identify parameters, evaluate estimators, run the demonstration.
 
 Every bad input ends in a one-line ``spaceid: error: ...`` message and exit code 2, without a
 traceback. The command sits at the top of the package graph: nothing imports it.
