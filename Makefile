@@ -33,3 +33,5 @@ lint: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python benchmarks/env_steps.py
 	$(BIN)/python benchmarks/physics_checks.py
+	$(BIN)/python benchmarks/objective_throughput.py
+	$(BIN)/python benchmarks/fit_time.py

@@ -360,7 +360,7 @@ def _plots(out: Path, rows: Sequence[dict[str, Any]]) -> dict[str, Path]:
     plt.close(fig)
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.5))
-    for spec in specs:
+    for spec in [s for s in ("pso", "improved-pso", "nn", "hybrid") if s in specs] or specs[:4]:  # the paper's comparison
         mine = [r for r in rows if r["estimator"] == spec]
         true = np.array([r["true_base_mass_kg"] for r in mine])
         est = np.array([r["estimated_base_mass_kg"] for r in mine])
