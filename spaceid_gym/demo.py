@@ -115,7 +115,7 @@ def _identify(dataset: Dataset) -> dict[str, Any]:
         in_std = (value - true) / std
         result["errors_in_std"][key] = in_std.tolist()
         print(
-            f"      {key:17s} estimate {np.array2string(value, precision=4)} +- {np.array2string(std, precision=2)}, "
+            f"      {key:17s} estimate {np.array2string(value, precision=4)} +- {np.array2string(std, formatter={'float_kind': '{:.2g}'.format})}, "
             f"true {np.array2string(true, precision=4)} ({np.array2string(in_std, precision=2)} std)"
         )
     return result
