@@ -37,8 +37,7 @@ def main() -> None:
         estimator_from_spec(spec).fit(model, log)  # warm-up: numba kernels compiled/loaded
         times, evaluations = [], []
         for seed in range(args.repeats):
-            estimator = estimator_from_spec(spec)
-            estimator.seed = seed
+            estimator = estimator_from_spec(spec, seed=seed)
             estimate = estimator.fit(model, log)
             times.append(estimate.wall_time_s)
             evaluations.append(estimate.n_evaluations)

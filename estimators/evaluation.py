@@ -90,8 +90,9 @@ def parse_estimator_specs(text: str) -> list[str]:
     return specs
 
 
-def estimator_from_spec(spec: str) -> Estimator:
-    """``name[key=value,...]`` -> the registered estimator with those options (values parsed as JSON where possible)."""
+def estimator_from_spec(spec: str, **overrides: Any) -> Estimator:
+    """``name[key=value,...]`` -> the registered estimator with those options (values parsed as JSON where
+    possible); ``overrides`` (e.g. ``seed``, ``max_evaluations``) replace options of the same name."""
     match = re.fullmatch(r"\s*([\w.-]+)\s*(?:\[(.*)\])?\s*", spec)
     if match is None:
         raise SpaceIdInputError(f"estimator spec {spec!r}: expected name or name[key=value,...]")
@@ -104,7 +105,7 @@ def estimator_from_spec(spec: str) -> Estimator:
             options[key.strip()] = json.loads(raw.strip())
         except json.JSONDecodeError:
             options[key.strip()] = raw.strip()
-    return make_estimator(match.group(1), **options)
+    return make_estimator(match.group(1), **{**options, **overrides})
 
 
 @dataclass(frozen=True)
@@ -143,8 +144,8 @@ def evaluate_setting(job: _Job) -> list[dict[str, Any]]:
     rows = []
     for spec in order:
         estimator = estimator_from_spec(spec)
-        if budget is not None and hasattr(estimator, "max_evaluations"):
-            estimator.max_evaluations = budget
+        if budget is not None and "max_evaluations" in estimator.get_params():
+            estimator = estimator_from_spec(spec, max_evaluations=budget)  # built again so the option is validated
         estimate = estimator.fit_problem(problem)
         if spec == job.budget_reference:
             budget = estimate.n_evaluations

@@ -78,8 +78,6 @@ from estimators.swarm import (
     inertia_at,
     nearest,
     nearest_best,
-    to_theta,
-    to_unit,
 )
 from spaceid_gym.errors import SpaceIdInputError
 
@@ -124,7 +122,7 @@ class _Incumbent:
 
     def __init__(self, problem: IdentificationProblem, split: SubsetCosts, theta: FloatArray) -> None:
         self.problem, self.split = problem, split
-        self.unit = to_unit(problem.parameters, theta)
+        self.unit = problem.parameters.to_unit(theta)
         self.reference = split.on_all(problem, np.asarray(theta, dtype=float)[None])[0]
         self.cost = float(split.weights @ self.reference)
         self.n_evaluated = 1
@@ -141,7 +139,7 @@ class _Incumbent:
             if c is not None:
                 costs[i] = c
         if todo:
-            costs[todo] = self.split.on_all(self.problem, to_theta(self.problem.parameters, points[todo]))
+            costs[todo] = self.split.on_all(self.problem, self.problem.parameters.from_unit(points[todo]))
             self.n_evaluated += len(todo)
         whole = costs @ self.split.weights
         if len(whole) and whole.min() < self.cost:
@@ -269,7 +267,7 @@ class ImprovedPSO(SwarmEstimator):
         n_resets = 0
         for generation in range(1, n_generations + 1):
             assignment = (ranks + generation) % split.n_subsets
-            raw = problem.cost_on_subsets(to_theta(params, unit), assignment, split.subsets)
+            raw = problem.cost_on_subsets(params.from_unit(unit), assignment, split.subsets)
             better = self._comparable(raw, assignment, best.reference) < self._comparable(best_raw, best_subset, best.reference)
             best_unit[better], best_raw[better], best_subset[better] = unit[better], raw[better], assignment[better]
 
@@ -301,14 +299,14 @@ class ImprovedPSO(SwarmEstimator):
         )
         history[-1] = best.cost
         return SearchResult(
-            theta=to_theta(params, best.unit),
+            theta=params.from_unit(best.unit),
             cost_history=history,
             extra={
                 "n_subsets_used": split.n_subsets,
                 "n_whole_log_evaluations": best.n_evaluated,
                 "n_finalists": len(finalists),
                 "n_resets": n_resets,
-                "final_pbest_std": np.std(to_theta(params, best_unit), axis=0).tolist(),
+                "final_pbest_std": np.std(params.from_unit(best_unit), axis=0).tolist(),
             },
         )
 

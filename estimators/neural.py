@@ -135,7 +135,7 @@ class NeuralNetworkEstimator(Estimator):
         sigma, noise_source = self.training_noise_std(problem)
 
         unit = rng.uniform(size=(self.n_train, problem.n_params))  # targets, (n_train, k)
-        features = simulated_window_means(problem, params.lower + unit * params.width, edges)
+        features = simulated_window_means(problem, params.from_unit(unit), edges)
         per_window = sigma / np.sqrt(np.diff(edges))  # std of the noise mean over each window, (W,)
         features += rng.standard_normal(features.shape) * np.repeat(per_window, 3)
         centre = features.mean(axis=0)
@@ -158,7 +158,7 @@ class NeuralNetworkEstimator(Estimator):
             measured = (window_means(problem.measured[None], edges) - centre) / scale
             estimate = np.clip(np.reshape(network.predict(measured), problem.n_params), 0.0, 1.0)
 
-        theta = params.lower + estimate * params.width
+        theta = params.from_unit(estimate)
         cost = float(problem.cost(theta[None], count=False)[0])
         train_rms = np.sqrt(np.mean((fitted - unit) ** 2, axis=0)) * params.width
         loss_curve = network.loss_curve_ if self.solver != "lbfgs" else network.lbfgs_losses

@@ -96,6 +96,14 @@ class Parameterisation(ABC):
         """``upper - lower`` (k,): the unit of the search space and of the identifiability test."""
         return self.upper - self.lower
 
+    def from_unit(self, unit: FloatArray) -> FloatArray:
+        """``theta = lower + unit * width`` (..., k) of positions in the unit search box (..., k)."""
+        return self.lower + np.asarray(unit, dtype=float) * self.width
+
+    def to_unit(self, theta: FloatArray) -> FloatArray:
+        """Unit-box position (..., k) of ``theta`` (..., k): the inverse of :meth:`from_unit`."""
+        return (np.asarray(theta, dtype=float) - self.lower) / self.width
+
     @abstractmethod
     def composite(self, theta: FloatArray) -> tuple[FloatArray, FloatArray | None]:
         """Base params10 (P, 10) and payload params10 (P, 10) or ``None``, for ``theta`` (P, k)."""

@@ -165,18 +165,20 @@ class IdentificationProblem:
         jac = self.jacobian(theta, count=False)
         return (jac.T @ jac) / (sigma * sigma)
 
+    def _range_scaled_fisher(self, theta: FloatArray, noise_std_rad_s: float | None) -> FloatArray:
+        """Fisher information in units of the search ranges (k, k): rank decisions compare like with like (kg vs m)."""
+        width = self.parameters.width
+        return self.fisher(theta, noise_std_rad_s) * np.outer(width, width)
+
     def crlb_std(self, theta: FloatArray, noise_std_rad_s: float | None = None) -> FloatArray:
         """Cramér-Rao standard deviations (k,) at ``theta``; ``inf`` in directions the log does not inform."""
-        width = self.parameters.width
-        scaled = self.fisher(theta, noise_std_rad_s) * np.outer(width, width)  # rank decisions in range units
-        return cramer_rao_std(scaled) * width
+        return cramer_rao_std(self._range_scaled_fisher(theta, noise_std_rad_s)) * self.parameters.width
 
     def crlb_physical_std(self, theta: FloatArray, noise_std_rad_s: float | None = None) -> dict[str, Any]:
         """Cramér-Rao std of the physical quantities (``base_mass_kg``, ...) at ``theta`` (delta method)."""
-        width = self.parameters.width
-        scaled = self.fisher(theta, noise_std_rad_s) * np.outer(width, width)
+        scaled = self._range_scaled_fisher(theta, noise_std_rad_s)
         identifiable = np.ones(self.n_params, dtype=bool)
-        return _derived_with_std(self.parameters, np.asarray(theta, dtype=float), scaled, width, identifiable)[1]
+        return _derived_with_std(self.parameters, np.asarray(theta, dtype=float), scaled, self.parameters.width, identifiable)[1]
 
     # ------------------------------------------------------------------ result
     def make_estimate(
@@ -195,7 +197,7 @@ class IdentificationProblem:
         params = self.parameters
         sigma, source = self.noise_std(theta)
         width = params.width
-        scaled = self.fisher(theta, sigma) * np.outer(width, width)
+        scaled = self._range_scaled_fisher(theta, sigma)
         std = cramer_rao_std(scaled) * width
         identifiable = std < IDENTIFIABLE_FRACTION * width
         messages = [
@@ -238,15 +240,19 @@ def _derived_with_std(
     """
     values = params.physical(theta)
     keys = list(values)
-    flat = [np.atleast_1d(np.asarray(values[k], dtype=float)).ravel() for k in keys]
+
+    def flatten(quantities: dict[str, Any]) -> list[FloatArray]:
+        return [np.atleast_1d(np.asarray(quantities[k], dtype=float)).ravel() for k in keys]
+
+    flat = flatten(values)
     sizes = [f.size for f in flat]
     step = 1e-6
     columns = []
     for j in range(len(theta)):
         delta = np.zeros_like(theta)
         delta[j] = step * width[j]
-        plus = np.concatenate([np.atleast_1d(np.asarray(params.physical(theta + delta)[k], dtype=float)).ravel() for k in keys])
-        minus = np.concatenate([np.atleast_1d(np.asarray(params.physical(theta - delta)[k], dtype=float)).ravel() for k in keys])
+        plus = np.concatenate(flatten(params.physical(theta + delta)))
+        minus = np.concatenate(flatten(params.physical(theta - delta)))
         columns.append((plus - minus) / (2.0 * step))  # per unit of the scaled parameter
     d_scaled = np.column_stack(columns)  # (n_derived, k)
     # marginal covariance of the identifiable parameters (pseudo-inverse: uninformed directions dropped)

@@ -14,7 +14,7 @@ import numpy as np
 from estimators.base import SearchResult
 from estimators.options import check_float, check_int
 from estimators.problem import IdentificationProblem
-from estimators.swarm import Inertia, SwarmEstimator, global_best, inertia_at, ring_best, to_theta
+from estimators.swarm import Inertia, SwarmEstimator, global_best, inertia_at, ring_best
 from spaceid_gym.errors import SpaceIdInputError
 
 
@@ -85,7 +85,7 @@ class ParticleSwarm(SwarmEstimator):
         best_cost = np.full(self.n_particles, np.inf)
         history: list[float] = []
         for generation in range(1, n_generations + 1):
-            cost = problem.cost(to_theta(params, unit))
+            cost = problem.cost(params.from_unit(unit))
             better = cost < best_cost
             best_unit[better], best_cost[better] = unit[better], cost[better]
             history.append(float(best_cost.min()))
@@ -95,9 +95,9 @@ class ParticleSwarm(SwarmEstimator):
             weight = inertia_at(self.inertia, generation, n_generations)
             unit, velocity = self._move(rng, unit, velocity, best_unit, best_unit[leader], weight)
         best = int(np.argmin(best_cost))
-        spread = np.std(to_theta(params, best_unit), axis=0)
+        spread = np.std(params.from_unit(best_unit), axis=0)
         return SearchResult(
-            theta=to_theta(params, best_unit[best]),
+            theta=params.from_unit(best_unit[best]),
             cost_history=history,
             extra={"n_generations_run": n_generations, "final_pbest_std": spread.tolist()},
         )

@@ -75,7 +75,7 @@ class BatchObjective:
     def theta(self, x: FloatArray) -> FloatArray:
         """Parameters (P, k) of the optimiser's points ``x`` (P, k)."""
         params = self.problem.parameters
-        return params.lower + x * params.width if self.unit_box else x
+        return params.from_unit(x) if self.unit_box else x
 
     def __call__(self, x: FloatArray) -> FloatArray:
         """Whole-log costs (P,) of the points ``x`` (P, k), (rad/s)^2."""

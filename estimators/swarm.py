@@ -27,7 +27,6 @@ from numpy.typing import NDArray
 
 from estimators.base import Estimator
 from estimators.options import check_float, check_int
-from estimators.parameters import Parameterisation
 from spaceid_gym.errors import SpaceIdInputError
 
 FloatArray = NDArray[np.float64]
@@ -50,17 +49,6 @@ def inertia_at(inertia: Inertia, generation: int, n_generations: int) -> float:
         return float(inertia)
     start, end = inertia
     return start + (end - start) * (generation - 1) / max(n_generations - 1, 1)
-
-
-# ---------------------------------------------------------------------- search space
-def to_theta(parameters: Parameterisation, unit: FloatArray) -> FloatArray:
-    """Parameters ``theta`` (P, k) of unit-box positions ``unit`` (P, k)."""
-    return parameters.lower + unit * parameters.width
-
-
-def to_unit(parameters: Parameterisation, theta: FloatArray) -> FloatArray:
-    """Unit-box position (..., k) of ``theta`` (..., k)."""
-    return (np.asarray(theta, dtype=float) - parameters.lower) / parameters.width
 
 
 # ---------------------------------------------------------------------- topologies

@@ -155,8 +155,7 @@ def _identify(args: argparse.Namespace) -> None:
     from spaceid_gym.robots import load_robot
 
     robot = load_robot(args.robot)
-    estimator = estimator_from_spec(args.estimator)
-    estimator.seed = args.seed
+    estimator = estimator_from_spec(args.estimator, seed=args.seed)
     bounds = {k: v for k, v in (("lower", args.lower), ("upper", args.upper)) if v is not None}
     model = IdentificationModel(robot, args.params, noise_std_rad_s=args.noise_std, **bounds)
     log = MeasurementLog.from_csv(args.log, n_joints=robot.n_joints)

@@ -9,34 +9,23 @@ from pathlib import Path
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
 
-def test_quickstart_runs() -> None:
-    result = subprocess.run(
-        [sys.executable, str(EXAMPLES / "quickstart.py"), "--robot", "quick3", "--duration", "3"],
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
+def _run(*args: str) -> subprocess.CompletedProcess[str]:
+    result = subprocess.run([sys.executable, *args], capture_output=True, text=True, timeout=600)
     assert result.returncode == 0, result.stderr
+    return result
+
+
+def test_quickstart_runs() -> None:
+    result = _run(str(EXAMPLES / "quickstart.py"), "--robot", "quick3", "--duration", "3")
     assert "Cramér-Rao bound" in result.stdout and "residual RMS" in result.stdout
 
 
 def test_demo_runs(tmp_path: Path) -> None:
-    result = subprocess.run(
-        [sys.executable, "-m", "spaceid_gym.cli", "demo", "--robot", "quick3", "--out", str(tmp_path)],
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    assert result.returncode == 0, result.stderr
+    _run("-m", "spaceid_gym.cli", "demo", "--robot", "quick3", "--out", str(tmp_path))
     assert {"overlay.png", "frame.png", "summary.json", "run1"} <= {p.name for p in tmp_path.iterdir()}
+    assert (tmp_path / "run1" / "estimate.json").is_file()
 
 
 def test_identify_fuel_runs() -> None:
-    result = subprocess.run(
-        [sys.executable, str(EXAMPLES / "identify_fuel.py"), "--robot", "quick3", "--duration", "20"],
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    assert result.returncode == 0, result.stderr
+    result = _run(str(EXAMPLES / "identify_fuel.py"), "--robot", "quick3", "--duration", "20")
     assert "hybrid: mdf" in result.stdout and "env loop (hybrid)" in result.stdout
