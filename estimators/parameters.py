@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from estimators.models.effects import EffectTerm
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.physics.fuel import FUEL_PARAMETER_NAMES, base_params10_after_fuel, base_params10_fuel_jacobian
 from spaceid_gym.physics.inertia import RigidBodyInertia
@@ -222,6 +223,65 @@ class PayloadParameters(Parameterisation):
         if theta[0] > 0.0:
             body = RigidBodyInertia.from_params10(theta)
             out.update(payload_com_m=body.com_m, payload_inertia_kgm2=body.inertia_com_kgm2)
+        return out
+
+
+class WithEffects(Parameterisation):
+    """A parameterisation extended by effect terms: ``theta = [theta_base, theta_effect_1, ...]``.
+
+    The effects' unknowns follow the base parameterisation's, in the order given (see
+    :mod:`estimators.models.effects` for each term's unknowns and ranges). A ``payload`` effect supplies the
+    payload parameters of the composite.
+
+    Args:
+        base: the parameterisation of the base (``fuel``, ``base``; not ``payload``, which is an effect here).
+        terms: the effect terms.
+    """
+
+    def __init__(self, base: Parameterisation, terms: list[EffectTerm]) -> None:
+        if base.composite(base.nominal[None])[1] is not None and any(t.name == "payload" for t in terms):
+            raise SpaceIdInputError(f"effects: the {base.name!r} parameterisation already identifies a payload")
+        self.base, self.terms = base, list(terms)
+        self.name = base.name + "".join(f"+{t.spec}" for t in terms)
+        self.names = base.names + tuple(n for t in terms for n in t.names)
+        bounds = [np.concatenate([getattr(base, a), *(getattr(t, a) for t in terms)]) for a in ("nominal", "lower", "upper")]
+        super().__init__(*bounds)
+        edges = np.cumsum([base.n_params, *(t.n_params for t in terms)])
+        self._slices = {t: slice(int(a), int(b)) for t, a, b in zip(terms, edges[:-1], edges[1:], strict=True)}
+        self._payload = next((t for t in terms if t.name == "payload"), None)
+
+    def base_part(self, theta: FloatArray) -> FloatArray:
+        """The base parameterisation's unknowns (..., k_base)."""
+        return np.asarray(theta, dtype=float)[..., : self.base.n_params]
+
+    def term_parts(self, theta: FloatArray) -> dict[EffectTerm, FloatArray]:
+        """Each term's unknowns (..., k_e)."""
+        theta = np.asarray(theta, dtype=float)
+        return {t: theta[..., part] for t, part in self._slices.items()}
+
+    def composite(self, theta: FloatArray) -> tuple[FloatArray, FloatArray | None]:
+        theta = np.atleast_2d(np.asarray(theta, dtype=float))
+        base10, payload10 = self.base.composite(self.base_part(theta))
+        if self._payload is not None:
+            payload10 = np.ascontiguousarray(theta[:, self._slices[self._payload]])
+        return base10, payload10
+
+    def composite_jacobian(self, theta: FloatArray) -> tuple[FloatArray, FloatArray | None]:
+        theta = np.asarray(theta, dtype=float)
+        d_base_part, d_payload_part = self.base.composite_jacobian(self.base_part(theta))
+        d_base = np.zeros((10, self.n_params))
+        d_base[:, : self.base.n_params] = d_base_part
+        if self._payload is None:
+            return d_base, d_payload_part
+        d_payload = np.zeros((10, self.n_params))
+        d_payload[:, self._slices[self._payload]] = np.eye(10)
+        return d_base, d_payload
+
+    def physical(self, theta: FloatArray) -> dict[str, Any]:
+        theta = np.asarray(theta, dtype=float)
+        out = self.base.physical(self.base_part(theta))
+        for term, part in self.term_parts(theta).items():
+            out.update(term.physical(part))
         return out
 
 

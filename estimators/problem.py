@@ -19,14 +19,16 @@ of a number.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from estimators.estimate import Estimate
+from estimators.models.effects import EffectContext, EffectPrediction, make_terms, parse_effects
 from estimators.models.momentum_model import MomentumModel, Samples
-from estimators.parameters import Parameterisation, make_parameterisation
+from estimators.parameters import FuelParameters, Parameterisation, WithEffects, make_parameterisation
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.information import cramer_rao_std
 from spaceid_gym.log import MeasurementLog
@@ -46,7 +48,10 @@ class IdentificationModel:
         params: ``"fuel"`` (default), ``"base"``, ``"payload"`` or a :class:`Parameterisation`.
         noise_std_rad_s: gyro noise std per sample and axis (rad/s) for the Cramér-Rao bound;
             ``None`` estimates it from the final residual (``sqrt(RSS / (3T - k))``).
-        **param_options: options of the parameterisation (``lower``, ``upper``, ...).
+        effects: effect terms added to the model, e.g. ``"initial_momentum,gyro_bias"`` or a list of names
+            (see :mod:`estimators.models.effects`); their unknowns follow the parameterisation's.
+        **param_options: options of the parameterisation (``lower``, ``upper``, ...: for the whole vector,
+            effects included).
     """
 
     def __init__(
@@ -54,21 +59,62 @@ class IdentificationModel:
         robot: Robot | str,
         params: str | Parameterisation = "fuel",
         noise_std_rad_s: float | None = None,
+        effects: str | list[str] | tuple[str, ...] | None = None,
         **param_options: Any,
     ) -> None:
         self.robot = robot if isinstance(robot, Robot) else load_robot(robot)
-        self.parameters = (
-            params if isinstance(params, Parameterisation) else make_parameterisation(params, self.robot, **param_options)
-        )
         if noise_std_rad_s is not None and not (np.isfinite(noise_std_rad_s) and noise_std_rad_s > 0.0):
             raise SpaceIdInputError(f"noise_std_rad_s: expected a positive number (rad/s) or None, got {noise_std_rad_s!r}")
         self.noise_std_rad_s = noise_std_rad_s
+        self.parameters = _parameterisation(self.robot, params, effects, param_options)
+        #: the effect specs in the model, e.g. ``("gyro_bias", "external_torque[drift=true]")``
+        self.effects: tuple[str, ...] = (
+            tuple(t.spec for t in self.parameters.terms) if isinstance(self.parameters, WithEffects) else ()
+        )
 
     def problem(self, log: MeasurementLog) -> IdentificationProblem:
         """The objective of this model on ``log`` (sets up the per-log arm terms once)."""
         if log.n_joints != self.robot.n_joints:
             raise SpaceIdInputError(f"log: has {log.n_joints} joints, the robot {self.robot.name!r} has {self.robot.n_joints}")
         return IdentificationProblem(self, log)
+
+
+def _parameterisation(
+    robot: Robot, params: str | Parameterisation, effects: str | list[str] | tuple[str, ...] | None, options: dict[str, Any]
+) -> Parameterisation:
+    """The model's unknowns: the parameterisation, extended by the effect terms if any.
+
+    With effects, ``lower``/``upper`` span the whole vector; the parameterisation's part goes to its constructor.
+    """
+    if not parse_effects(effects):
+        return params if isinstance(params, Parameterisation) else make_parameterisation(params, robot, **options)
+    bounds = {k: np.asarray(options.pop(k), dtype=float) for k in ("lower", "upper") if k in options}
+    base = params if isinstance(params, Parameterisation) else make_parameterisation(params, robot, **options)
+    terms = make_terms(effects, robot, _tank_locator(base))
+    n_total = base.n_params + sum(t.n_params for t in terms)
+    for key, value in bounds.items():
+        if value.shape != (n_total,):
+            raise SpaceIdInputError(
+                f"{key}: expected {n_total} bounds (the parameterisation's and the effects'), got {value.size}"
+            )
+    if bounds and not isinstance(params, Parameterisation):
+        base = make_parameterisation(params, robot, **options, **{k: v[: base.n_params] for k, v in bounds.items()})
+        terms = make_terms(effects, robot, _tank_locator(base))
+    offset = base.n_params
+    for term in terms:
+        part = slice(offset, offset + term.n_params)
+        term.lower = bounds["lower"][part] if "lower" in bounds else term.lower
+        term.upper = bounds["upper"][part] if "upper" in bounds else term.upper
+        offset += term.n_params
+    return WithEffects(base, terms)
+
+
+def _tank_locator(base: Parameterisation) -> Callable[[FloatArray], FloatArray] | None:
+    """Where a slosh mass sits for ``theta_base`` (P, k_base): the fuel parameters' tank (full-tank CoM + bf); else ``None`` (the default)."""
+    if not isinstance(base, FuelParameters):
+        return None
+    full_com = np.asarray(base.base_full.com_m, dtype=float)
+    return lambda theta_base: full_com + np.asarray(theta_base, dtype=float)[:, 1:4]
 
 
 class IdentificationProblem:
@@ -85,6 +131,12 @@ class IdentificationProblem:
         self.parameters = model.parameters
         self.log = log
         self.momentum = MomentumModel(model.robot, log)
+        params = model.parameters
+        self._effects = (
+            EffectPrediction(self.momentum, params.terms, EffectContext.from_log(log))
+            if isinstance(params, WithEffects)
+            else None
+        )
         self.measured = np.ascontiguousarray(log.omega_base_body_rad_s, dtype=float)
         self.n_samples = log.n_samples
         self.n_model_samples = 0
@@ -102,11 +154,33 @@ class IdentificationProblem:
     # ------------------------------------------------------------------ objective
     def predict(self, theta: FloatArray, samples: Samples = slice(None), count: bool = True) -> FloatArray:
         """Predicted base rate (P, T', 3) for ``theta`` (P, k); counted in the budget unless ``count=False``."""
-        base10, payload10 = self.parameters.composite(np.atleast_2d(theta))
-        omega = self.momentum.predict(base10, payload10, samples)
+        theta = np.atleast_2d(np.asarray(theta, dtype=float))
+        base10, payload10 = self.parameters.composite(theta)
+        if self._effects is None:
+            omega = self.momentum.predict(base10, payload10, samples)
+        else:
+            params = self.parameters
+            assert isinstance(params, WithEffects)
+            tank = _slosh_tank(params, theta)
+            omega = self._effects.predict(base10, payload10, params.term_parts(theta), tank, samples)
         if count:
             self.n_model_samples += omega.shape[0] * omega.shape[1]
         return omega
+
+    def gyro_error(self, theta: FloatArray) -> FloatArray:
+        """What the measurement effects add to the base rate, ``omega_gyro - omega_base`` (T, 3), rad/s, at ``theta`` (k,).
+
+        Zero without measurement effects (``gyro_bias``, ``gyro_scale``, ``delay``); not counted in the budget.
+        """
+        theta = np.atleast_2d(np.asarray(theta, dtype=float))
+        measured = self.predict(theta, count=False)[0]
+        if self._effects is None:
+            return np.zeros_like(measured)
+        params = self.parameters
+        assert isinstance(params, WithEffects)
+        base10, payload10 = params.composite(theta)
+        true = self._effects.predict(base10, payload10, params.term_parts(theta), _slosh_tank(params, theta), slice(None), True)
+        return measured - true[0]
 
     def cost(self, theta: FloatArray, samples: Samples = slice(None), count: bool = True) -> FloatArray:
         """Mean squared residual (rad/s)^2 over ``samples`` and the 3 axes, for ``theta`` (P, k): (P,)."""
@@ -140,6 +214,8 @@ class IdentificationProblem:
     def jacobian(self, theta: FloatArray, count: bool = True) -> FloatArray:
         """``d predicted / d theta`` (3T, k) at ``theta`` (k,), analytic; counted as k evaluations."""
         theta = np.asarray(theta, dtype=float)
+        if self._effects is not None:
+            return self._difference_jacobian(theta, count)
         base10, payload10 = self.parameters.composite(theta)
         d_base, d_payload = self.parameters.composite_jacobian(theta)
         j_base, j_payload = self.momentum.jacobian(base10[0], None if payload10 is None else payload10[0])
@@ -149,6 +225,20 @@ class IdentificationProblem:
         if count:
             self.n_model_samples += self.n_params * self.n_samples
         return jac.reshape(-1, self.n_params)
+
+    def _difference_jacobian(self, theta: FloatArray, count: bool) -> FloatArray:
+        """Central differences (3T, k) with steps of 1e-6 of each search width (effects: no analytic Jacobian).
+
+        All 2k points go through one batched prediction; counted as 2k evaluations.
+        """
+        step = 1e-6 * self.parameters.width
+        points = np.repeat(theta[None], 2 * self.n_params, axis=0)
+        index = np.arange(self.n_params)
+        points[2 * index, index] += step
+        points[2 * index + 1, index] -= step
+        omega = self.predict(points, count=count)  # (2k, T, 3)
+        jac = (omega[0::2] - omega[1::2]) / (2.0 * step[:, None, None])
+        return jac.reshape(self.n_params, -1).T
 
     # ------------------------------------------------------------------ information
     def noise_std(self, theta: FloatArray) -> tuple[float, str]:
@@ -229,6 +319,14 @@ class IdentificationProblem:
             n_samples=self.n_samples,
             extra=dict(extra or {}),
         )
+
+
+def _slosh_tank(params: WithEffects, theta: FloatArray) -> FloatArray:
+    """Tank positions (P, 3) for a slosh term (zeros if the model has none)."""
+    slosh = next((t for t in params.terms if t.name == "slosh"), None)
+    if slosh is None:
+        return np.zeros((len(theta), 3))
+    return np.ascontiguousarray(slosh.tank_of(params.base_part(theta)), dtype=float)  # type: ignore[attr-defined]
 
 
 def _derived_with_std(

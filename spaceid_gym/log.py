@@ -461,6 +461,20 @@ def _write_text_atomic(path: Path, text: str) -> None:
         f.write(text)
 
 
+def write_text_atomic(path: PathLike, text: str) -> Path:
+    """Write ``text`` to ``path`` atomically (a temporary file renamed into place)."""
+    path = Path(path)
+    _write_text_atomic(path, text)
+    return path
+
+
+def write_json_atomic(path: PathLike, data: dict[str, Any]) -> Path:
+    """Write ``data`` as indented JSON to ``path`` atomically (numpy arrays and scalars become lists and numbers, NaN null)."""
+    path = Path(path)
+    _write_text_atomic(path, json.dumps(_to_json(data, "", nonfinite_as_null=True), indent=2) + "\n")
+    return path
+
+
 # ---------------------------------------------------------------------- dataset folders
 @dataclass
 class Dataset:
@@ -479,16 +493,21 @@ class Dataset:
     path: Path
 
 
-def _to_json(value: Any, where: str) -> Any:
-    """``value`` with numpy arrays/scalars (and tuples, paths) turned into plain JSON types."""
+def _to_json(value: Any, where: str, nonfinite_as_null: bool = False) -> Any:
+    """``value`` with numpy arrays/scalars (and tuples, paths) turned into plain JSON types.
+
+    A non-finite float is an error, or ``None`` with ``nonfinite_as_null`` (a figure that does not exist).
+    """
     if isinstance(value, np.ndarray):
-        return _to_json(value.tolist(), where)
+        return _to_json(value.tolist(), where, nonfinite_as_null)
     if isinstance(value, np.generic):
-        return _to_json(value.item(), where)
+        return _to_json(value.item(), where, nonfinite_as_null)
     if value is None or isinstance(value, (bool, int, str)):
         return value
     if isinstance(value, float):
         if not math.isfinite(value):
+            if nonfinite_as_null:
+                return None
             raise SpaceIdInputError(f"truth{where}: {value!r} cannot be written to JSON; expected a finite number")
         return value
     if isinstance(value, dict):
@@ -496,10 +515,10 @@ def _to_json(value: Any, where: str) -> Any:
         for key, item in value.items():
             if not isinstance(key, str):
                 raise SpaceIdInputError(f"truth{where}: key {key!r} must be a string")
-            out[str(key)] = _to_json(item, f"{where}[{str(key)!r}]")
+            out[str(key)] = _to_json(item, f"{where}[{str(key)!r}]", nonfinite_as_null)
         return out
     if isinstance(value, (list, tuple)):
-        return [_to_json(item, f"{where}[{i}]") for i, item in enumerate(value)]
+        return [_to_json(item, f"{where}[{i}]", nonfinite_as_null) for i, item in enumerate(value)]
     if isinstance(value, os.PathLike):
         return os.fspath(value)
     raise SpaceIdInputError(f"truth{where}: cannot write a {type(value).__name__} to JSON")

@@ -13,6 +13,10 @@ in its frame) adds ``A_t pi`` to the composite's parameters (``A_t`` the frame c
 parameters, linear) and ``G_t pi`` to the momentum (``G_t`` maps ``pi`` to the payload's momentum
 for the last link's velocity relative to the base), both precomputed per sample.
 
+Effects that change the system momentum (a non-zero total angular momentum, an external torque, a
+moving internal mass) enter as an **extra momentum** per parameter set and sample, ``[P; L]`` (P, T, 6)
+in the base frame about the base origin: ``M v = extra - h_arm`` (:meth:`MomentumModel.predict_twist`).
+
 This model never touches the simulator's integration path: it needs only the log's ``q`` and ``dq``.
 """
 
@@ -87,6 +91,38 @@ class MomentumModel:
         to_base, momentum_map = self._payload_maps()
         payload = np.atleast_2d(np.asarray(payload10, dtype=float))
         return _base_rate_with_payload(base, payload, self.arm_mass_kg, *arm, to_base[samples], momentum_map[samples])
+
+    def predict_twist(
+        self,
+        base10: FloatArray,
+        payload10: FloatArray | None = None,
+        extra_momentum: FloatArray | None = None,
+        samples: Samples = slice(None),
+    ) -> FloatArray:
+        """Base twist ``[v; omega]`` (m/s, rad/s, base axes) for P parameter sets, shape (P, T, 6).
+
+        Args:
+            base10, payload10: as in :meth:`predict`.
+            extra_momentum: the system momentum not carried by the arm's joint motion, ``[P; L]`` about the
+                base origin in base axes, (P, T, 6) (N s, N m s), for the samples selected; ``None`` for zero.
+            samples: which samples of the log (default all).
+        """
+        base = np.atleast_2d(np.asarray(base10, dtype=float))
+        n_p = base.shape[0]
+        arm = (self._first_moment[samples], self._inertia6[samples], self._momentum[samples])
+        n_t = arm[0].shape[0]
+        extra = np.zeros((1, 1, 6)) if extra_momentum is None else np.asarray(extra_momentum, dtype=float)
+        if extra_momentum is not None and extra.shape != (n_p, n_t, 6):
+            raise ValueError(f"extra_momentum: expected shape {(n_p, n_t, 6)}, got {extra.shape}")
+        if payload10 is None:
+            payload, to_base, momentum_map = np.zeros((1, 10)), np.zeros((1, 10, 10)), np.zeros((1, 6, 10))
+        else:
+            payload = np.atleast_2d(np.asarray(payload10, dtype=float))
+            maps = self._payload_maps()
+            to_base, momentum_map = maps[0][samples], maps[1][samples]
+        return _base_twist(
+            base, payload, payload10 is not None, extra, extra_momentum is not None, self.arm_mass_kg, *arm, to_base, momentum_map
+        )
 
     def predict_base_params(self, params10: FloatArray, samples: Samples = slice(None)) -> FloatArray:
         """Base rate for base parameters ``params10`` (P, 10) or (10,): (P, T, 3) or (T, 3)."""
@@ -185,6 +221,59 @@ def _rate_of_composite(
     out[0] = (c00 * rx + c01 * ry + c02 * rz) * inv_det
     out[1] = (c01 * rx + c11 * ry + c12 * rz) * inv_det
     out[2] = (c02 * rx + c12 * ry + c22 * rz) * inv_det
+
+
+@njit(cache=True, inline="always")
+def _twist_of_composite(
+    mass: float, hx: float, hy: float, hz: float, j: FloatArray, momentum: FloatArray, out: FloatArray
+) -> None:
+    """``[v; omega]`` (6,) of a composite that carries ``-momentum`` (see :func:`_rate_of_composite`).
+
+    ``P = m (v + omega x c)`` gives ``v = P / m - omega x c`` with ``P = -momentum[:3]``.
+    """
+    _rate_of_composite(mass, hx, hy, hz, j, momentum, out[3:])
+    cx, cy, cz = hx / mass, hy / mass, hz / mass
+    wx, wy, wz = out[3], out[4], out[5]
+    out[0] = -momentum[0] / mass - (wy * cz - wz * cy)
+    out[1] = -momentum[1] / mass - (wz * cx - wx * cz)
+    out[2] = -momentum[2] / mass - (wx * cy - wy * cx)
+
+
+@njit(cache=True)
+def _base_twist(
+    params10: FloatArray,
+    payload10: FloatArray,
+    with_payload: bool,
+    extra: FloatArray,
+    with_extra: bool,
+    arm_mass: float,
+    first: FloatArray,
+    inertia6: FloatArray,
+    momentum: FloatArray,
+    to_base: FloatArray,
+    momentum_map: FloatArray,
+) -> FloatArray:
+    """Twist (P, T, 6) with an optional payload (P, 10) and extra momentum (P, T, 6): ``M v = extra - h_arm``."""
+    n_p, n_t = params10.shape[0], first.shape[0]
+    out = np.empty((n_p, n_t, 6))
+    j = np.empty(6)
+    h = np.empty(6)
+    comp = np.empty(10)
+    for i in range(n_p):
+        for t in range(n_t):
+            comp[:] = params10[i]
+            h[:] = momentum[t]
+            if with_payload:
+                comp += to_base[t] @ payload10[i]
+                h += momentum_map[t] @ payload10[i]
+            if with_extra:
+                h -= extra[i, t]
+            for k in range(6):
+                j[k] = comp[4 + k] + inertia6[t, k]
+            _twist_of_composite(
+                comp[0] + arm_mass, comp[1] + first[t, 0], comp[2] + first[t, 1], comp[3] + first[t, 2], j, h, out[i, t]
+            )
+    return out
 
 
 @njit(cache=True)

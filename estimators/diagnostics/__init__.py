@@ -1,0 +1,56 @@
+"""Diagnostics: residual analysis, plots and the self-contained HTML report."""
+
+from estimators.diagnostics.plots import (
+    plot_before_after,
+    plot_correlations,
+    plot_overlay,
+    plot_ranking,
+    plot_residuals,
+    plot_spectrum,
+)
+from estimators.diagnostics.report import HtmlReport, write_bytes_atomic
+from estimators.diagnostics.residuals import (
+    CrossCorrelation,
+    ResidualAnalysis,
+    Segment,
+    SpectralPeak,
+    analyse_residuals,
+    autocorrelation,
+    cross_correlation,
+    dominant_frequencies,
+    failing_segments,
+    fit_percent,
+    ljung_box,
+    noise_floor_dof,
+    noise_floor_std,
+    periodogram,
+    white_noise_band,
+    white_spectrum_level,
+)
+
+__all__ = [
+    "CrossCorrelation",
+    "HtmlReport",
+    "ResidualAnalysis",
+    "Segment",
+    "SpectralPeak",
+    "analyse_residuals",
+    "autocorrelation",
+    "cross_correlation",
+    "dominant_frequencies",
+    "failing_segments",
+    "fit_percent",
+    "ljung_box",
+    "noise_floor_dof",
+    "noise_floor_std",
+    "periodogram",
+    "plot_before_after",
+    "plot_correlations",
+    "plot_overlay",
+    "plot_ranking",
+    "plot_residuals",
+    "plot_spectrum",
+    "white_noise_band",
+    "white_spectrum_level",
+    "write_bytes_atomic",
+]

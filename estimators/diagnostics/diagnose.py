@@ -1,0 +1,400 @@
+"""Which physical effect is the model missing? Re-identify with each candidate effect and rank them.
+
+For a model (robot, parameterisation, effects already in it) and a log, :func:`diagnose`:
+
+1. fits the model as it is (the *baseline*, by default with the ``hybrid`` estimator);
+2. for each candidate effect of the catalogue (:mod:`estimators.models.effects`) not yet in the model,
+   fits the model with that effect added, by least squares from the baseline (and from the term's own
+   starting points: several slosh frequencies, a light payload), keeping the best;
+3. scores every fit on the whole likelihood: the gyro residuals, ``RSS / sigma^2`` with ``sigma`` the
+   residual std of the best-fitting model (``sqrt(RSS / (3T - k))``), plus, when the log has attitude,
+   the gyro-stellar consistency (:mod:`estimators.diagnostics.gyro_stellar`), which tells a biased gyro
+   from a real rotation. For a candidate:
+
+   * ``lr_statistic = X_baseline - X_candidate``, chi-square with ``k_e`` degrees of freedom when the
+     effect is absent (nested models): ``p_value``; *significant* below ``alpha / (number of
+     candidates)`` (Bonferroni);
+   * ``bic = X + k ln(n)`` (Schwarz), ``delta_bic`` relative to the baseline (negative is better);
+   * *plausible*: no reason from :meth:`~estimators.models.effects.EffectTerm.implausible` (on a search
+     bound, unphysical payload, no slosh mass);
+   * residual reduction, residual RMS and fit % (gyro channel);
+
+4. gives a verdict: the candidate with the lowest BIC among the significant and plausible ones, if it
+   explains at least :data:`EXPLAINED_FRACTION` of the baseline's excess over the noise
+   (``X_baseline - (n - k)``); ``"none"`` when no candidate is significant and the baseline residual is
+   white (:func:`~estimators.diagnostics.residuals.analyse_residuals`); ``"unexplained"`` otherwise, with
+   the residual structure described (dominant frequencies, correlated inputs, where in time).
+
+``Diagnosis.to_dict()`` is the ``diagnose --out`` JSON: ``verdict`` (a catalogue name, ``none`` or
+``unexplained``) and ``candidates`` (best first, each with ``effect`` and its figures).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import least_squares
+from scipy.stats import chi2
+
+from estimators.base import Estimator
+from estimators.diagnostics.gyro_stellar import GyroStellarCheck
+from estimators.diagnostics.residuals import ResidualAnalysis, analyse_residuals
+from estimators.estimate import Estimate
+from estimators.least_squares import LevenbergMarquardt
+from estimators.models.effects import EFFECT_TERMS
+from estimators.parameters import WithEffects
+from estimators.problem import IdentificationModel, IdentificationProblem
+from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.log import MeasurementLog
+
+FloatArray = NDArray[np.float64]
+
+#: the candidates tried by default: the whole catalogue
+DEFAULT_CANDIDATES: tuple[str, ...] = tuple(EFFECT_TERMS)
+
+#: a candidate is named only if it explains at least this fraction of the baseline's excess over the noise
+EXPLAINED_FRACTION = 0.3
+
+#: the verdicts besides a catalogue name
+NO_MISSING_EFFECT = "none"
+UNEXPLAINED = "unexplained"
+
+
+@dataclass
+class ModelFit:
+    """One model fitted to the log and its scores.
+
+    Attributes:
+        effects: the model's effects (the baseline's plus the candidate).
+        effect: the candidate added (``None`` for the baseline).
+        theta: the fitted unknowns (k,); ``names`` their names.
+        rss: sum of squared gyro residuals, (rad/s)^2; ``n_residuals`` 3T; ``n_params`` k.
+        attitude_chi2: gyro-stellar chi-square at the fit (``None`` without attitude in the log), over
+            ``n_attitude_values`` values.
+        physical: the fitted quantities (base and effects), as in the estimate file.
+        implausible: reasons why the fitted effect is not physical (empty if plausible).
+        wall_time_s: time of the fit.
+    """
+
+    effects: tuple[str, ...]
+    effect: str | None
+    theta: FloatArray
+    names: tuple[str, ...]
+    rss: float
+    n_residuals: int
+    n_params: int
+    attitude_chi2: float | None
+    n_attitude_values: int
+    physical: dict[str, Any]
+    implausible: list[str]
+    wall_time_s: float
+    # scores, filled in by :func:`diagnose` once every model is fitted
+    chi2: float = math.nan
+    bic: float = math.nan
+    delta_bic: float = math.nan
+    lr_statistic: float = math.nan
+    p_value: float = math.nan
+    significant: bool = False
+    explained_fraction: float = math.nan
+
+    @property
+    def residual_rms_rad_s(self) -> float:
+        """RMS of the gyro residual (rad/s)."""
+        return math.sqrt(self.rss / self.n_residuals)
+
+    @property
+    def plausible(self) -> bool:
+        return not self.implausible
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able summary."""
+        return {
+            "effect": self.effect,
+            "effects": list(self.effects),
+            "n_params": self.n_params,
+            "residual_rms_rad_s": self.residual_rms_rad_s,
+            "rss": self.rss,
+            "attitude_chi2": self.attitude_chi2,
+            "chi2": self.chi2,
+            "bic": self.bic,
+            "delta_bic": self.delta_bic,
+            "lr_statistic": self.lr_statistic,
+            "p_value": self.p_value,
+            "significant": self.significant,
+            "plausible": self.plausible,
+            "implausible": list(self.implausible),
+            "explained_fraction": self.explained_fraction,
+            "parameters": {n: float(v) for n, v in zip(self.names, self.theta, strict=True)},
+            "physical": _jsonable(self.physical),
+            "wall_time_s": self.wall_time_s,
+        }
+
+
+@dataclass
+class Diagnosis:
+    """What :func:`diagnose` found.
+
+    Attributes:
+        verdict: the missing effect's name, :data:`NO_MISSING_EFFECT` or :data:`UNEXPLAINED`.
+        baseline: the model as given, fitted.
+        candidates: one fit per candidate effect, best (lowest BIC) first.
+        analysis: residual analysis of the baseline fit.
+        noise_std_rad_s: the gyro noise std used for the scores (residual std of the best model).
+        alpha: the family-wise significance level; ``reason``: why this verdict, in a sentence.
+    """
+
+    verdict: str
+    baseline: ModelFit
+    candidates: list[ModelFit]
+    analysis: ResidualAnalysis
+    noise_std_rad_s: float
+    alpha: float
+    reason: str
+    attitude_check: bool
+    baseline_estimate: Estimate | None = field(default=None, repr=False)
+
+    @property
+    def best(self) -> ModelFit | None:
+        """The named candidate, if the verdict names one."""
+        return next((c for c in self.candidates if c.effect == self.verdict), None)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The ``diagnose --out`` JSON."""
+        return {
+            "verdict": self.verdict,
+            "reason": self.reason,
+            "alpha": self.alpha,
+            "noise_std_rad_s": self.noise_std_rad_s,
+            "attitude_check": self.attitude_check,
+            "baseline": self.baseline.to_dict(),
+            "candidates": [c.to_dict() for c in self.candidates],
+            "residual_analysis": self.analysis.to_dict(),
+            "structure": self.analysis.structure_description(),
+        }
+
+    def ranking_table(self) -> list[dict[str, Any]]:
+        """One row per candidate (best first) for a report table."""
+        return [
+            {
+                "effect": c.effect,
+                "delta BIC": f"{c.delta_bic:.1f}",
+                "LR statistic": f"{c.lr_statistic:.1f}",
+                "p-value": f"{c.p_value:.2g}",
+                "significant": "yes" if c.significant else "no",
+                "plausible": "yes" if c.plausible else "no: " + "; ".join(c.implausible),
+                "residual RMS (rad/s)": f"{c.residual_rms_rad_s:.3g}",
+                "explained": f"{100 * c.explained_fraction:.0f} %",
+            }
+            for c in self.candidates
+        ]
+
+
+def fit_model(
+    model: IdentificationModel,
+    log: MeasurementLog,
+    estimator: Estimator | None = None,
+    starts: list[FloatArray] | None = None,
+    check: GyroStellarCheck | None = None,
+    effect: str | None = None,
+    noise_std_rad_s: float | None = None,
+) -> tuple[ModelFit, Estimate | None]:
+    """Fit ``model`` to ``log``: with ``estimator`` (returns its estimate), or by least squares from each of ``starts``.
+
+    From ``starts``, a model with measurement effects (gyro bias, scale, delay) is fitted to the gyro
+    residuals and the gyro-stellar check together (``check``, weighted with ``noise_std_rad_s`` against
+    the check's own noise), since the attitude is what tells a gyro error from a real rotation; other
+    models to the gyro residuals alone (the check does not depend on them).
+    """
+    begin = time.perf_counter()
+    problem = model.problem(log)
+    estimate = None
+    if estimator is not None:
+        estimate = estimator.fit_problem(problem)
+        theta = estimate.theta
+    else:
+        if not starts:
+            raise SpaceIdInputError("fit_model: give an estimator or at least one start")
+        measurement = isinstance(problem.parameters, WithEffects) and any(
+            t.stage == "measurement" for t in problem.parameters.terms
+        )
+        if check is not None and measurement and noise_std_rad_s is not None:
+            results = [_joint_fit(problem, check, noise_std_rad_s, start) for start in starts]
+        else:
+            polish = LevenbergMarquardt(max_iterations=MAX_ITERATIONS)
+            results = [polish.polish(problem, start).theta for start in starts]
+        scores = [_chi2(problem, x, check, noise_std_rad_s) for x in results]
+        theta = results[int(np.argmin(scores))]
+    return _scored(problem, theta, model, check, effect, time.perf_counter() - begin), estimate
+
+
+#: accepted least-squares steps per start of a candidate fit
+MAX_ITERATIONS = 30
+
+
+def _chi2(problem: IdentificationProblem, theta: FloatArray, check: GyroStellarCheck | None, sigma: float | None) -> float:
+    """Gyro RSS (over ``sigma^2`` if given) plus the gyro-stellar chi-square if ``check``: what a candidate fit minimises."""
+    r = problem.residuals(theta, count=False)
+    value = float(r @ r) / (sigma * sigma if sigma else 1.0)
+    return value + (check.chi2(problem.gyro_error(theta)) if check is not None and sigma else 0.0)
+
+
+def _joint_fit(problem: IdentificationProblem, check: GyroStellarCheck, sigma: float, start: FloatArray) -> FloatArray:
+    """Least squares on ``[gyro residual / sigma; gyro-stellar residual / its std]`` from ``start`` (k,)."""
+    params = problem.parameters
+
+    def residuals(x: FloatArray) -> FloatArray:
+        gyro = problem.residuals(x) / sigma
+        attitude = (check.rate_error - check.predicted(problem.gyro_error(x))) / check.std
+        return np.concatenate((gyro, attitude.ravel()))
+
+    x0 = np.clip(start, params.lower, params.upper)
+    result = least_squares(
+        residuals, x0, bounds=(params.lower, params.upper), x_scale=params.width, method="trf", max_nfev=20 * MAX_ITERATIONS
+    )
+    return np.asarray(result.x, dtype=float)
+
+
+def _scored(
+    problem: IdentificationProblem,
+    theta: FloatArray,
+    model: IdentificationModel,
+    check: GyroStellarCheck | None,
+    effect: str | None,
+    wall: float,
+) -> ModelFit:
+    residual = problem.residuals(theta, count=False)
+    params = problem.parameters
+    implausible: list[str] = []
+    if effect is not None:
+        assert isinstance(params, WithEffects)
+        term = next(t for t in params.terms if t.name == effect)
+        implausible = term.implausible(params.term_parts(theta)[term])
+    return ModelFit(
+        effects=model.effects,
+        effect=effect,
+        theta=np.asarray(theta, dtype=float),
+        names=tuple(params.names),
+        rss=float(residual @ residual),
+        n_residuals=residual.size,
+        n_params=params.n_params,
+        attitude_chi2=None if check is None else check.chi2(problem.gyro_error(theta)),
+        n_attitude_values=0 if check is None else check.n_values,
+        physical=params.physical(theta),
+        implausible=implausible,
+        wall_time_s=wall,
+    )
+
+
+def candidate_model(model: IdentificationModel, effect: str) -> IdentificationModel:
+    """``model`` with ``effect`` added (same robot, parameterisation and noise setting)."""
+    params = model.parameters
+    base = params.base if isinstance(params, WithEffects) else params
+    return IdentificationModel(model.robot, base, model.noise_std_rad_s, effects=[*model.effects, effect])
+
+
+def diagnose(
+    model: IdentificationModel,
+    log: MeasurementLog,
+    candidates: tuple[str, ...] | list[str] | None = None,
+    estimator: Estimator | None = None,
+    alpha: float = 0.01,
+) -> Diagnosis:
+    """Rank the candidate effects for ``model`` on ``log``; see the module docstring.
+
+    Args:
+        model: the model as it is (its effects are kept in every candidate).
+        log: the measurement window.
+        candidates: effect names to try (default: every catalogue effect not in the model).
+        estimator: fits the baseline (default ``hybrid`` with seed 0).
+        alpha: family-wise significance level of the likelihood-ratio tests.
+    """
+    from estimators.registry import make_estimator
+
+    if not 0.0 < alpha < 1.0:
+        raise SpaceIdInputError(f"alpha: expected a level in (0, 1), got {alpha!r}")
+    present = {spec.partition("[")[0] for spec in model.effects}
+    names = [c for c in (candidates if candidates is not None else DEFAULT_CANDIDATES) if c not in present]
+    unknown = [c for c in names if c not in EFFECT_TERMS]
+    if unknown:
+        raise SpaceIdInputError(f"candidates: unknown effects {unknown}; expected names from {', '.join(EFFECT_TERMS)}")
+    check = GyroStellarCheck.from_log(log)
+    baseline, estimate = fit_model(model, log, estimator or make_estimator("hybrid"), check=check)
+    sigma0 = math.sqrt(baseline.rss / (baseline.n_residuals - baseline.n_params))
+    fits = []
+    for name in names:
+        extended = candidate_model(model, name)
+        params = extended.parameters
+        assert isinstance(params, WithEffects)
+        term = params.terms[-1]
+        starts = [np.concatenate((baseline.theta, s)) for s in term.starts()]
+        fits.append(fit_model(extended, log, starts=starts, check=check, effect=name, noise_std_rad_s=sigma0)[0])
+    sigma = _score(baseline, fits, alpha)
+    analysis = analyse_residuals(
+        log.t_s,
+        log.omega_base_body_rad_s,
+        log.omega_base_body_rad_s + model.problem(log).residuals(baseline.theta, count=False).reshape(-1, 3),
+        log.q_rad,
+        log.dq_rad_s,
+        noise_std=np.full(3, sigma),
+    )
+    verdict, reason = _verdict(baseline, fits, analysis)
+    fits.sort(key=lambda f: f.bic)
+    return Diagnosis(verdict, baseline, fits, analysis, sigma, alpha, reason, check is not None, estimate)
+
+
+def _score(baseline: ModelFit, fits: list[ModelFit], alpha: float) -> float:
+    """Fill in the scores of every fit; returns the gyro noise std used (rad/s)."""
+    everything = [baseline, *fits]
+    sigma2 = min(f.rss / (f.n_residuals - f.n_params) for f in everything)
+    for f in everything:
+        f.chi2 = f.rss / sigma2 + (f.attitude_chi2 or 0.0)
+    n = baseline.n_residuals + baseline.n_attitude_values
+    for f in everything:
+        f.bic = f.chi2 + f.n_params * math.log(n)
+        f.delta_bic = f.bic - baseline.bic
+    excess = baseline.chi2 - (n - baseline.n_params)
+    for f in fits:
+        k = f.n_params - baseline.n_params
+        f.lr_statistic = baseline.chi2 - f.chi2
+        f.p_value = float(chi2.sf(max(f.lr_statistic, 0.0), k))
+        f.significant = f.p_value < alpha / max(len(fits), 1)
+        f.explained_fraction = f.lr_statistic / excess if excess > 0 else 0.0
+    return math.sqrt(sigma2)
+
+
+def _verdict(baseline: ModelFit, fits: list[ModelFit], analysis: ResidualAnalysis) -> tuple[str, str]:
+    """The verdict and its reason (see the module docstring)."""
+    named = [f for f in fits if f.significant and f.plausible]
+    if named:
+        best = min(named, key=lambda f: f.bic)
+        if best.explained_fraction >= EXPLAINED_FRACTION:
+            return str(best.effect), (
+                f"adding {best.effect} lowers the BIC by {-best.delta_bic:.1f} (likelihood ratio {best.lr_statistic:.1f}, "
+                f"p = {best.p_value:.2g}) and explains {100 * best.explained_fraction:.0f} % of the excess over the noise"
+            )
+        return UNEXPLAINED, (
+            f"the best significant candidate ({best.effect}) explains only {100 * best.explained_fraction:.0f} % of the "
+            f"excess over the noise; {analysis.structure_description()}"
+        )
+    significant = [f for f in fits if f.significant]
+    if not significant and analysis.white:
+        return NO_MISSING_EFFECT, "no candidate is significant and the residual is consistent with white noise"
+    if significant:
+        rejected = "; ".join(f"{f.effect}: {', '.join(f.implausible)}" for f in significant)
+        return UNEXPLAINED, f"the significant candidates are not physical ({rejected}); {analysis.structure_description()}"
+    return UNEXPLAINED, f"no candidate is significant but the residual is structured: {analysis.structure_description()}"
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {k: _jsonable(v) for k, v in value.items()}
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.floating | np.integer):
+        return value.item()
+    return value

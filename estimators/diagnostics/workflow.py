@@ -1,0 +1,273 @@
+"""The whole loop: compare, diagnose, add the missing effect, watch the error fall, and report it.
+
+:func:`apply_effect` re-identifies with an effect added (from the diagnosis's fit of that candidate, or
+from scratch with an estimator); :func:`run_loop` chains compare -> diagnose -> apply -> compare and,
+when the truth is known (a simulated dataset's ``truth.json``), the parameter errors before and after
+against their Cramér-Rao bounds; :func:`write_report` writes it all as one self-contained HTML page
+(plots embedded) next to the PNG files.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from estimators.base import Estimator
+from estimators.diagnostics.compare import Comparison, compare
+from estimators.diagnostics.diagnose import Diagnosis, ModelFit, candidate_model, diagnose
+from estimators.diagnostics.plots import plot_before_after, plot_correlations, plot_overlay, plot_ranking, plot_residuals
+from estimators.diagnostics.report import HtmlReport
+from estimators.estimate import Estimate
+from estimators.problem import IdentificationModel
+from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.log import MeasurementLog
+
+FloatArray = NDArray[np.float64]
+
+
+def apply_effect(
+    model: IdentificationModel,
+    log: MeasurementLog,
+    effect: str,
+    diagnosis: Diagnosis | None = None,
+    estimator: Estimator | None = None,
+) -> tuple[IdentificationModel, Estimate]:
+    """``model`` with ``effect`` added, identified on ``log``.
+
+    With a ``diagnosis`` that fitted this candidate, its fit (least squares from the baseline) is the
+    estimate; otherwise ``estimator`` (default ``hybrid``) identifies the extended model from scratch.
+    """
+    from estimators.registry import make_estimator
+
+    extended = candidate_model(model, effect)
+    fit = None if diagnosis is None else next((c for c in diagnosis.candidates if c.effect == effect), None)
+    if fit is None:
+        return extended, (estimator or make_estimator("hybrid")).fit(extended, log)
+    problem = extended.problem(log)
+    return extended, problem.make_estimate(
+        fit.theta,
+        estimator="diagnose",
+        options={"from": "the candidate's least-squares fit in the diagnosis"},
+        seed=None,
+        cost_history=[fit.rss / fit.n_residuals],
+        wall_time_s=fit.wall_time_s,
+    )
+
+
+@dataclass
+class ParameterErrors:
+    """Errors of the base parameterisation's unknowns against the truth, also in Cramér-Rao standard deviations.
+
+    Attributes:
+        names: the unknowns (fuel: ``fuel_consumed_kg``, ``tank_x_m``, ...).
+        error: estimate - truth (k,); ``crlb_std`` (k,) the bound at the estimate; ``z = error / crlb_std``.
+    """
+
+    names: tuple[str, ...]
+    error: FloatArray
+    crlb_std: FloatArray
+
+    @property
+    def z(self) -> FloatArray:
+        return self.error / self.crlb_std
+
+    def rows(self) -> list[dict[str, Any]]:
+        return [
+            {"parameter": n, "error": float(e), "Cramér-Rao std": float(s), "|error| / std": float(abs(e / s))}
+            for n, e, s in zip(self.names, self.error, self.crlb_std, strict=True)
+        ]
+
+
+def parameter_errors(estimate: Estimate, truth: dict[str, Any]) -> ParameterErrors | None:
+    """Errors of the fuel unknowns against ``truth`` (``truth.json`` keys), ``None`` if the truth lacks them."""
+    names = ("fuel_consumed_kg", "tank_x_m", "tank_y_m", "tank_z_m")
+    if "fuel_consumed_kg" not in truth or "tank_position_m" not in truth or not set(names) <= set(estimate.names):
+        return None
+    true = np.array([truth["fuel_consumed_kg"], *truth["tank_position_m"]], dtype=float)
+    index = [estimate.names.index(n) for n in names]
+    return ParameterErrors(names, estimate.theta[index] - true, estimate.theta_std[index])
+
+
+@dataclass
+class LoopResult:
+    """Compare, diagnose, apply, compare again (see :func:`run_loop`)."""
+
+    model: IdentificationModel
+    diagnosis: Diagnosis
+    before: Comparison
+    applied: str | None
+    after: Comparison | None
+    estimate_before: Estimate
+    estimate_after: Estimate | None
+    truth: dict[str, Any] | None
+    errors_before: ParameterErrors | None
+    errors_after: ParameterErrors | None
+
+    def summary(self) -> str:
+        """What happened, in a few lines."""
+        lines = [self.before.summary(), f"diagnosis: {self.diagnosis.verdict} ({self.diagnosis.reason})"]
+        if self.after is not None:
+            lines.append(f"after adding {self.applied}:")
+            lines.append(self.after.summary())
+        if self.errors_before is not None:
+            lines.append("fuel unknowns, |error| / Cramér-Rao std, before: " + _z_text(self.errors_before))
+        if self.errors_after is not None:
+            lines.append("fuel unknowns, |error| / Cramér-Rao std, after:  " + _z_text(self.errors_after))
+        return "\n".join(lines)
+
+    def before_after_rows(self) -> list[dict[str, Any]]:
+        """Residual RMS / noise and fit % per axis, before and after (noise floor: the diagnosis's)."""
+        if self.after is None:
+            return []
+        rows = []
+        for c, name in enumerate(self.before.analysis.channel_names):
+            rows.append(
+                {
+                    "axis": name,
+                    "RMS / noise before": float(self.before.analysis.rms_over_noise[c]),
+                    "RMS / noise after": float(self.after.analysis.rms_over_noise[c]),
+                    "fit % before": float(self.before.analysis.fit_percent[c]),
+                    "fit % after": float(self.after.analysis.fit_percent[c]),
+                }
+            )
+        return rows
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {
+            "diagnosis": self.diagnosis.to_dict(),
+            "before": self.before.to_dict(),
+            "applied": self.applied,
+            "after": None if self.after is None else self.after.to_dict(),
+        }
+        for key, errors in (("errors_before", self.errors_before), ("errors_after", self.errors_after)):
+            out[key] = None if errors is None else errors.rows()
+        return out
+
+
+def _z_text(errors: ParameterErrors) -> str:
+    return ", ".join(f"{n} {abs(z):.2f}" for n, z in zip(errors.names, errors.z, strict=True))
+
+
+def run_loop(
+    model: IdentificationModel,
+    log: MeasurementLog,
+    truth: dict[str, Any] | None = None,
+    apply: str | None = "best",
+    noise_std_rad_s: float | None = None,
+    estimator: Estimator | None = None,
+    candidates: tuple[str, ...] | list[str] | None = None,
+) -> LoopResult:
+    """Compare the model with ``log``, diagnose it, add an effect (``"best"``: the verdict's, or a name; ``None``: none) and compare again.
+
+    The noise floor of both comparisons is ``noise_std_rad_s`` if given, else the diagnosis's (the residual
+    std of the best-fitting candidate), so before and after are measured against the same floor.
+    """
+    diagnosis = diagnose(model, log, candidates=candidates, estimator=estimator)
+    if diagnosis.baseline_estimate is None:
+        raise SpaceIdInputError("run_loop: the diagnosis did not keep the baseline estimate")
+    floor = noise_std_rad_s if noise_std_rad_s is not None else diagnosis.noise_std_rad_s
+    before = compare(model, log, diagnosis.baseline.theta, floor, label=model.parameters.name)
+    effect = diagnosis.best.effect if apply == "best" and diagnosis.best is not None else (None if apply == "best" else apply)
+    after = estimate_after = None
+    if effect is not None:
+        extended, estimate_after = apply_effect(model, log, effect, diagnosis)
+        after = compare(extended, log, estimate_after.theta, floor, label=extended.parameters.name)
+    errors = (None, None)
+    if truth is not None:
+        errors = (
+            parameter_errors(diagnosis.baseline_estimate, truth),
+            None if estimate_after is None else parameter_errors(estimate_after, truth),
+        )
+    return LoopResult(
+        model, diagnosis, before, effect, after, diagnosis.baseline_estimate, estimate_after, truth, errors[0], errors[1]
+    )
+
+
+def write_report(result: LoopResult, path: str | Path, title: str = "Model against measurements") -> Path:
+    """One self-contained HTML page (plots embedded) of ``result``; the PNGs are written next to it in ``<name>_figures/``."""
+    path = Path(path)
+    figures = path.parent / f"{path.stem}_figures"
+    figures.mkdir(parents=True, exist_ok=True)
+    d, before, after = result.diagnosis, result.before, result.after
+    page = HtmlReport(title)
+    page.add_paragraph(
+        f"Model {before.label} on a log of {len(before.t_s)} samples ({before.t_s[-1] - before.t_s[0]:.1f} s). "
+        f"Verdict: {d.verdict!r}. {d.reason}."
+    )
+    page.add_heading("1. Model against the measurements")
+    overlay = plot_overlay(
+        figures / "overlay.png",
+        before.t_s,
+        before.measured,
+        before.predicted,
+        before.analysis.segments,
+        predicted_after=None if after is None else after.predicted,
+        title=f"Gyro rate: measured, model {before.label}" + ("" if after is None else f" and {after.label}"),
+    )
+    page.add_image(
+        overlay, "Measured base rate (base body frame) and the model's; shaded: where the model fails, numbered by rank."
+    )
+    page.add_table(before.analysis.channel_rows(), "Per axis: fit %, residual RMS against the noise floor, whiteness.")
+    if before.analysis.segments:
+        page.add_table(before.analysis.segment_rows(), "Where it fails: time segments whose residual exceeds the noise, ranked.")
+    residuals = plot_residuals(
+        figures / "residuals.png",
+        before.t_s,
+        before.residual,
+        before.analysis.noise_std,
+        before.analysis.segments,
+        residual_after=None if after is None else after.residual,
+    )
+    page.add_image(residuals, "Residual with the +-2 sigma noise band and its 1 s moving average.")
+    page.add_heading("2. Residual analysis")
+    page.add_image(
+        plot_correlations(figures / "correlations.png", before.analysis), "Autocorrelation and cross-correlation with the inputs."
+    )
+    page.add_paragraph(before.analysis.structure_description())
+    page.add_heading("3. Which effect is missing")
+    page.add_table(d.ranking_table(), "Candidate effects, best first (BIC: lower is better; significance Bonferroni-corrected).")
+    page.add_image(
+        plot_ranking(figures / "ranking.png", [{"effect": c.effect, "bic_improvement": -c.delta_bic} for c in d.candidates]),
+        "BIC improvement of each candidate over the model as it is.",
+    )
+    if after is not None:
+        page.add_heading(f"4. After adding {result.applied}")
+        page.add_table(result.before_after_rows(), "Residual RMS over the noise floor and fit %, before and after.")
+        labels = list(before.analysis.channel_names)
+        chart = plot_before_after(
+            figures / "before_after.png",
+            labels,
+            before.analysis.rms_over_noise,
+            after.analysis.rms_over_noise,
+            "residual RMS / noise floor",
+            title=f"Residual before and after adding {result.applied}",
+        )
+        page.add_image(chart, "Residual RMS over the noise floor per axis.")
+        page.add_paragraph(after.analysis.structure_description())
+        fitted = _fitted_effect(d, result.applied)
+        if fitted is not None:
+            page.add_table(
+                [{"quantity": k, "value": _text(v)} for k, v in fitted.physical.items() if k not in _base_keys()],
+                f"The fitted {result.applied}.",
+            )
+    for label, errors in (("before", result.errors_before), ("after", result.errors_after)):
+        if errors is not None:
+            page.add_table(errors.rows(), f"Fuel unknowns against the truth, {label}.")
+    return page.write(path)
+
+
+def _fitted_effect(diagnosis: Diagnosis, effect: str | None) -> ModelFit | None:
+    return next((c for c in diagnosis.candidates if c.effect == effect), None)
+
+
+def _base_keys() -> set[str]:
+    return {"fuel_consumed_kg", "tank_position_m", "base_mass_kg", "base_com_m", "base_inertia_kgm2"}
+
+
+def _text(value: Any) -> str:
+    array = np.asarray(value, dtype=float)
+    return np.array2string(array, precision=4) if array.ndim else f"{float(array):.4g}"

@@ -1,0 +1,566 @@
+"""Effect terms of the identification model: physical effects the paper's model leaves out.
+
+The paper's model (:mod:`estimators.models.momentum_model`) assumes zero system momentum, a perfect gyro
+sampled with the encoders, a rigid base and an empty gripper. Each :class:`EffectTerm` removes one of these
+assumptions with its own unknowns (names with units, a nominal value that switches it off, a documented
+search range) and acts in one of three places of the prediction:
+
+* **body** — ``payload``: an object held by the last link adds its 10 inertial parameters to the
+  composite (the payload maps of the momentum model);
+* **momentum** — the momentum the base and arm carry is not ``-h_arm``:
+
+  - ``initial_momentum``: a constant system angular momentum ``l0`` (residual spin, stored wheel momentum),
+    expressed in the base frame at the log's first sample, so ``L_body(t) = R_rel(t)^T l0``;
+  - ``external_torque``: ``L(t) = l0 + tau t`` (+ ``tau_rate t^2 / 2`` with ``drift=True``), the
+    momentum is not conserved (thruster leak, gravity gradient); frames as for ``initial_momentum``;
+  - ``slosh``: a point mass ``m_s`` on an isotropic spring-damper (``f``, ``zeta``) at the tank,
+    driven by the tank's inertial acceleration; its momentum relative to the base is taken from the
+    rigid bodies (see :class:`Slosh`);
+
+* **measurement** — the gyro does not read the base rate at the encoders' sample time:
+  ``omega_meas(t) = (I + E) omega(t - d) + b`` with ``delay`` ``d``, ``gyro_scale`` ``E`` (scale factors on
+  the diagonal, misalignments off it) and ``gyro_bias`` ``b``.
+
+``R_rel(t) = R(t0)^T R(t)`` is the base attitude relative to the first sample, from the log's quaternions
+or, in a log without them, by integrating the logged gyro rate (its angle random walk, ~2e-4 rad over a
+minute for the default gyro, is negligible here).
+
+Plausibility (:meth:`EffectTerm.implausible`): an effect whose fitted value sits on its search bound is not
+plausible (it absorbs something else), and each term adds its physics (a payload must be a physical body,
+the slosh mass cannot exceed the liquid left in the tank).
+
+The simulator implements the same effects independently as physics (:mod:`spaceid_gym.effects`); tests
+compare the two.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+
+from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.log import MeasurementLog
+from spaceid_gym.physics.inertia import RigidBodyInertia
+from spaceid_gym.robots import Robot
+from spaceid_gym.sim.lie import matrix_from_quat, so3_exp
+
+FloatArray = NDArray[np.float64]
+
+#: the usable fuel of the default mission, as a fraction of the full-tank base mass (:class:`~spaceid_gym.sim.mission.FuelSchedule`)
+USABLE_FUEL_FRACTION = 0.25
+
+
+@dataclass(frozen=True)
+class EffectContext:
+    """What the effect terms need from the log and the robot.
+
+    Attributes:
+        t_s: sample times from the first sample (T,), s.
+        rot_rel: base attitude relative to the first sample, ``R(t0)^T R(t)`` (T, 3, 3).
+        attitude_source: ``"quaternion"`` (logged) or ``"integrated gyro"``.
+    """
+
+    t_s: FloatArray
+    rot_rel: FloatArray
+    attitude_source: str
+
+    @classmethod
+    def from_log(cls, log: MeasurementLog) -> EffectContext:
+        """The context of ``log`` (attitude from its quaternions, else from its gyro)."""
+        t = np.asarray(log.t_s, dtype=float) - float(log.t_s[0])
+        if log.quat_base_to_inertial_wxyz is not None:
+            rot = np.stack([matrix_from_quat(qt) for qt in log.quat_base_to_inertial_wxyz])
+            rot_rel = np.einsum("ji,tjk->tik", rot[0], rot)
+            source = "quaternion"
+        else:
+            rot_rel = _integrate_attitude(t, np.asarray(log.omega_base_body_rad_s, dtype=float))
+            source = "integrated gyro"
+        return cls(t, rot_rel, source)
+
+
+def _integrate_attitude(t_s: FloatArray, omega_body: FloatArray) -> FloatArray:
+    """``R_rel`` (T, 3, 3) from body rates (T, 3) by the midpoint rule on SO(3)."""
+    rot = np.empty((len(t_s), 3, 3))
+    rot[0] = np.eye(3)
+    for k in range(1, len(t_s)):
+        rot[k] = rot[k - 1] @ so3_exp(0.5 * (omega_body[k - 1] + omega_body[k]) * (t_s[k] - t_s[k - 1]))
+    return rot
+
+
+class EffectTerm(ABC):
+    """One effect: its unknowns and how it changes the prediction (see the module docstring).
+
+    Attributes:
+        name: the catalogue name.
+        names: its unknowns with units (k_e,); ``nominal`` (switches the effect off), ``lower``, ``upper`` (k_e,).
+        stage: ``"body"``, ``"momentum"``, ``"slosh"`` or ``"measurement"``: where it acts.
+    """
+
+    name: ClassVar[str]
+    stage: ClassVar[str]
+    names: tuple[str, ...]
+
+    def __init__(self, nominal: FloatArray, lower: FloatArray, upper: FloatArray) -> None:
+        self.nominal = np.asarray(nominal, dtype=float)
+        self.lower = np.asarray(lower, dtype=float)
+        self.upper = np.asarray(upper, dtype=float)
+
+    @property
+    def n_params(self) -> int:
+        """k_e."""
+        return len(self.names)
+
+    @property
+    def spec(self) -> str:
+        """The term as :func:`parse_effects` reads it (its name, with options if any)."""
+        return self.name
+
+    def starts(self) -> list[FloatArray]:
+        """Starting points (k_e,) for a local fit of this term from a fit without it (default: the nominal)."""
+        return [self.nominal.copy()]
+
+    @abstractmethod
+    def physical(self, theta: FloatArray) -> dict[str, Any]:
+        """The fitted effect as physical quantities at ``theta`` (k_e,) (keys as in ``truth.json``'s ``hidden_effects``)."""
+
+    def implausible(self, theta: FloatArray) -> list[str]:
+        """Reasons why ``theta`` (k_e,) is not physically plausible (empty if it is): by default, values on a search bound."""
+        width = self.upper - self.lower
+        on_bound = (theta <= self.lower + 1e-6 * width) | (theta >= self.upper - 1e-6 * width)
+        on_bound &= np.abs(theta - self.nominal) > 1e-6 * width  # a nominal on a bound means "off"
+        return [f"{n} = {v:.4g} is on its search bound" for n, v, hit in zip(self.names, theta, on_bound, strict=True) if hit]
+
+
+class _VectorTerm(EffectTerm):
+    """A 3-vector effect, nominal zero, symmetric range ``+-bound``."""
+
+    unit: ClassVar[str]
+    bound: ClassVar[float]
+    prefix: ClassVar[str]
+
+    def __init__(self, robot: Robot) -> None:
+        self.names = tuple(f"{self.prefix}_{axis}_{self.unit}" for axis in "xyz")
+        super().__init__(np.zeros(3), -np.full(3, self.bound), np.full(3, self.bound))
+
+    def physical(self, theta: FloatArray) -> dict[str, Any]:
+        return {f"{self.name}_{self.unit}": np.asarray(theta, dtype=float).copy()}
+
+
+class InitialMomentum(_VectorTerm):
+    """``l0`` (3,), N m s, base frame at the first sample; range +-2 N m s (0.3 deg/s of the base of ``paper6``)."""
+
+    name = "initial_momentum"
+    stage = "momentum"
+    unit, bound, prefix = "Nms", 2.0, "momentum"
+
+    def angular_momentum(self, theta: FloatArray, context: EffectContext) -> FloatArray:
+        """System angular momentum in base axes (P, T, 3) for ``theta`` (P, 3)."""
+        return np.einsum("tji,pj->pti", context.rot_rel, theta)
+
+
+class ExternalTorque(EffectTerm):
+    """``[l0 (3) N m s, tau (3) N m]`` (+ ``tau_rate`` (3) N m/s with ``drift``): ``L(t) = l0 + tau t + tau_rate t^2 / 2``.
+
+    Ranges: ``l0`` +-2 N m s, ``tau`` +-0.01 N m (two orders above gravity gradient on ``paper6``), ``tau_rate``
+    +-1e-4 N m/s.
+    """
+
+    name = "external_torque"
+    stage = "momentum"
+
+    def __init__(self, robot: Robot, drift: bool = False) -> None:
+        names = [f"momentum_{a}_Nms" for a in "xyz"] + [f"torque_{a}_Nm" for a in "xyz"]
+        bounds = [2.0] * 3 + [0.01] * 3
+        if drift:
+            names += [f"torque_rate_{a}_Nm_s" for a in "xyz"]
+            bounds += [1e-4] * 3
+        self.names, self.drift = tuple(names), drift
+        super().__init__(np.zeros(len(names)), -np.array(bounds), np.array(bounds))
+
+    def angular_momentum(self, theta: FloatArray, context: EffectContext) -> FloatArray:
+        """System angular momentum in base axes (P, T, 3) for ``theta`` (P, k_e)."""
+        t = context.t_s
+        inertial = theta[:, None, 0:3] + theta[:, None, 3:6] * t[None, :, None]
+        if self.drift:
+            inertial = inertial + 0.5 * theta[:, None, 6:9] * (t * t)[None, :, None]
+        return np.einsum("tji,ptj->pti", context.rot_rel, inertial)
+
+    @property
+    def spec(self) -> str:
+        return f"{self.name}[drift=true]" if self.drift else self.name
+
+    def physical(self, theta: FloatArray) -> dict[str, Any]:
+        out = {"initial_momentum_Nms": theta[0:3].copy(), "external_torque_Nm": theta[3:6].copy()}
+        if self.drift:
+            out["external_torque_rate_Nm_s"] = theta[6:9].copy()
+        return out
+
+
+class GyroBias(_VectorTerm):
+    """``b`` (3,), rad/s, base body frame; range +-1e-3 rad/s (200 deg/h, far beyond any navigation gyro)."""
+
+    name = "gyro_bias"
+    stage = "measurement"
+    unit, bound, prefix = "rad_s", 1e-3, "bias"
+
+    def measure(self, omega: FloatArray, theta: FloatArray, context: EffectContext) -> FloatArray:
+        """``omega + b``: (P, T, 3)."""
+        return omega + theta[:, None, :]
+
+
+class GyroScale(EffectTerm):
+    """``E`` (3x3, row-major, 9 unknowns): ``omega_meas = (I + E) omega``; range +-0.02 (2 % scale, 20 mrad misalignment)."""
+
+    name = "gyro_scale"
+    stage = "measurement"
+
+    def __init__(self, robot: Robot) -> None:
+        self.names = tuple(f"scale_{r}{c}" for r in "xyz" for c in "xyz")
+        super().__init__(np.zeros(9), np.full(9, -0.02), np.full(9, 0.02))
+
+    def measure(self, omega: FloatArray, theta: FloatArray, context: EffectContext) -> FloatArray:
+        """``(I + E) omega``: (P, T, 3)."""
+        return omega + np.einsum("pij,ptj->pti", theta.reshape(-1, 3, 3), omega)
+
+    def physical(self, theta: FloatArray) -> dict[str, Any]:
+        return {"gyro_scale_misalignment": np.asarray(theta, dtype=float).reshape(3, 3).copy()}
+
+
+class Delay(EffectTerm):
+    """``d`` (1,), s: the gyro reads the rate at ``t - d`` (Catmull-Rom interpolation of the prediction); range +-0.1 s.
+
+    Before the first sample the rate is held at its first value (a log that starts at rest).
+    """
+
+    name = "delay"
+    stage = "measurement"
+    names = ("delay_s",)
+
+    def __init__(self, robot: Robot) -> None:
+        super().__init__(np.zeros(1), np.array([-0.1]), np.array([0.1]))
+
+    def measure(self, omega: FloatArray, theta: FloatArray, context: EffectContext) -> FloatArray:
+        """``omega(t - d)``: (P, T, 3), for a uniformly sampled log."""
+        t = context.t_s
+        dt = (t[-1] - t[0]) / (len(t) - 1)
+        return _shift(omega, theta[:, 0] / dt)
+
+    def physical(self, theta: FloatArray) -> dict[str, Any]:
+        return {"delay_s": float(theta[0])}
+
+
+@njit(cache=True)
+def _shift(x: FloatArray, lag: FloatArray) -> FloatArray:
+    """``x`` (P, T, C) read ``lag[p]`` samples earlier (fractional, Catmull-Rom; clamped at the ends)."""
+    n_p, n_t, n_c = x.shape
+    out = np.empty_like(x)
+    for p in range(n_p):
+        for t in range(n_t):
+            s = t - lag[p]
+            k = int(np.floor(s))
+            u = s - k
+            i0, i1, i2, i3 = k - 1, k, k + 1, k + 2
+            i0, i1 = min(max(i0, 0), n_t - 1), min(max(i1, 0), n_t - 1)
+            i2, i3 = min(max(i2, 0), n_t - 1), min(max(i3, 0), n_t - 1)
+            w0 = ((-u + 2.0) * u - 1.0) * u * 0.5
+            w1 = ((3.0 * u - 5.0) * u * u + 2.0) * 0.5
+            w2 = ((-3.0 * u + 4.0) * u + 1.0) * u * 0.5
+            w3 = (u - 1.0) * u * u * 0.5
+            for c in range(n_c):
+                out[p, t, c] = w0 * x[p, i0, c] + w1 * x[p, i1, c] + w2 * x[p, i2, c] + w3 * x[p, i3, c]
+    return out
+
+
+class Payload(EffectTerm):
+    """10 inertial parameters of an object held by the last link (about the last joint's origin, its frame).
+
+    Ranges as :class:`~estimators.parameters.PayloadParameters`: mass ``[0, arm mass]``, first moments and
+    inertia entries for an object up to 0.5 m across.
+    """
+
+    name = "payload"
+    stage = "body"
+
+    def __init__(self, robot: Robot) -> None:
+        from estimators.parameters import PayloadParameters  # the same ranges as the payload parameterisation
+
+        ranges = PayloadParameters(robot)
+        self.names = ranges.names
+        super().__init__(ranges.nominal, ranges.lower, ranges.upper)
+
+    def starts(self) -> list[FloatArray]:
+        """A light compact object at the last joint (a zero mass sits on the bound, where the rest has no effect)."""
+        start = np.zeros(10)
+        start[0] = 0.05 * self.upper[0]
+        start[[4, 6, 9]] = start[0] * 0.05**2
+        return [start]
+
+    def physical(self, theta: FloatArray) -> dict[str, Any]:
+        out: dict[str, Any] = {"payload_mass_kg": float(theta[0])}
+        if theta[0] > 0.0:
+            body = RigidBodyInertia.from_params10(theta)
+            out.update(payload_com_m=body.com_m, payload_inertia_kgm2=body.inertia_com_kgm2)
+        return out
+
+    def implausible(self, theta: FloatArray) -> list[str]:
+        reasons = [r for r in super().implausible(theta) if not r.startswith(self.names[0])]  # mass >= 0 is physics below
+        if theta[0] <= 0.0:
+            return [*reasons, f"payload mass {theta[0]:.3g} kg is not positive"]
+        eigenvalues = np.linalg.eigvalsh(_pseudo_inertia(theta))
+        if eigenvalues.min() <= 0.0:
+            reasons.append(f"payload inertia is not that of a physical body (pseudo-inertia eigenvalue {eigenvalues.min():.3g})")
+        return reasons
+
+
+def _pseudo_inertia(params10: FloatArray) -> FloatArray:
+    """4x4 pseudo-inertia ``[[tr(I)/2 E - I, h], [h^T, m]]``: positive definite iff the parameters are a physical body."""
+    m, h = params10[0], params10[1:4]
+    xx, xy, yy, xz, yz, zz = params10[4:10]
+    inertia = np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
+    out = np.empty((4, 4))
+    out[:3, :3] = 0.5 * np.trace(inertia) * np.eye(3) - inertia
+    out[:3, 3] = out[3, :3] = h
+    out[3, 3] = m
+    return out
+
+
+class Slosh(EffectTerm):
+    """``[m_s kg, f Hz, zeta]``: part of the liquid moves as a point mass on an isotropic spring-damper at the tank.
+
+    Equivalent-mechanical model of the first slosh mode (Abramson, NASA SP-106; Dodge 2000). The mass sits
+    at the tank ``r`` (base frame; from the fuel parameters, else the full-tank CoM) when at rest and is
+    part of the rigid base there; its displacement ``x`` (base axes) obeys
+    ``x'' + 2 zeta w x' + w^2 x = -a_tank(t)``, ``w = 2 pi f``, driven by the tank's inertial acceleration
+    ``a_tank = dv/dt + omega x v + domega/dt x r + omega x (omega x r)`` (base axes) of the rigid prediction.
+    Its momentum relative to the base, ``[m_s x'; m_s (r + x) x x']``, is then carried by the rest, and the
+    prediction repeats once with the slosh-corrected twist. Neglected: Coriolis on ``x'`` and the shift of
+    the composite's first moment by ``m_s x`` (both of order ``|omega| |x|``, about 1 % of the term).
+    Integrated with RK4 at the log's sample period, starting at rest.
+
+    Ranges: ``m_s`` in ``[0, usable fuel]``, ``f`` in ``[0.05, 2]`` Hz, ``zeta`` in ``[0.005, 1]``; nominal
+    ``m_s = 0`` (off).
+    """
+
+    name = "slosh"
+    stage = "slosh"
+    names = ("slosh_mass_kg", "slosh_frequency_hz", "slosh_damping_ratio")
+    #: starting frequencies (Hz) of the local fits: the cost is multimodal in the frequency
+    START_FREQUENCIES_HZ = (0.15, 0.3, 0.6)
+
+    def __init__(self, robot: Robot, tank_of: Callable[[FloatArray], FloatArray] | None = None) -> None:
+        liquid_max_kg = USABLE_FUEL_FRACTION * robot.base_full.mass_kg
+        super().__init__(np.array([0.0, 0.3, 0.05]), np.array([0.0, 0.05, 0.005]), np.array([liquid_max_kg, 2.0, 1.0]))
+        full_com = np.asarray(robot.base_full.com_m, dtype=float)
+        self.tank_of = tank_of if tank_of is not None else (lambda theta_base: np.broadcast_to(full_com, (len(theta_base), 3)))
+
+    def starts(self) -> list[FloatArray]:
+        return [np.array([0.1 * self.upper[0], f, 0.05]) for f in self.START_FREQUENCIES_HZ]
+
+    def momentum(self, twist: FloatArray, theta: FloatArray, tank_m: FloatArray, context: EffectContext) -> FloatArray:
+        """The slosh mass's momentum relative to the base, ``[P; L]`` about the base origin (P, T, 6), for rigid twists (P, T, 6)."""
+        omega_n = 2.0 * np.pi * theta[:, 1]
+        return _slosh_momentum(
+            np.ascontiguousarray(twist), context.t_s, np.ascontiguousarray(tank_m), theta[:, 0], omega_n, theta[:, 2]
+        )
+
+    def physical(self, theta: FloatArray) -> dict[str, Any]:
+        return {"slosh_mass_kg": float(theta[0]), "slosh_frequency_hz": float(theta[1]), "slosh_damping_ratio": float(theta[2])}
+
+    def implausible(self, theta: FloatArray) -> list[str]:
+        reasons = super().implausible(theta)
+        if theta[0] <= 0.0:
+            reasons.append("slosh mass is zero")
+        return reasons
+
+
+@njit(cache=True, inline="always")
+def _cross(ax: float, ay: float, az: float, bx: float, by: float, bz: float) -> tuple[float, float, float]:
+    return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+
+
+@njit(cache=True)
+def _slosh_momentum(
+    twist: FloatArray, t_s: FloatArray, tank: FloatArray, mass: FloatArray, omega_n: FloatArray, zeta: FloatArray
+) -> FloatArray:
+    """See :meth:`Slosh.momentum`; RK4 with the forcing linear between samples (each axis is the same scalar oscillator)."""
+    n_p, n_t = twist.shape[0], twist.shape[1]
+    out = np.zeros((n_p, n_t, 6))
+    accel = np.empty((n_t, 3))
+    for p in range(n_p):
+        rx, ry, rz = tank[p, 0], tank[p, 1], tank[p, 2]
+        # tank acceleration (base axes) from the twist, derivatives by central differences
+        for k in range(n_t):
+            lo, hi = max(k - 1, 0), min(k + 1, n_t - 1)
+            inv = 1.0 / (t_s[hi] - t_s[lo])
+            vx, vy, vz, wx, wy, wz = (
+                twist[p, k, 0],
+                twist[p, k, 1],
+                twist[p, k, 2],
+                twist[p, k, 3],
+                twist[p, k, 4],
+                twist[p, k, 5],
+            )
+            dwx = (twist[p, hi, 3] - twist[p, lo, 3]) * inv
+            dwy = (twist[p, hi, 4] - twist[p, lo, 4]) * inv
+            dwz = (twist[p, hi, 5] - twist[p, lo, 5]) * inv
+            a1 = _cross(wx, wy, wz, vx, vy, vz)
+            a2 = _cross(dwx, dwy, dwz, rx, ry, rz)
+            wr = _cross(wx, wy, wz, rx, ry, rz)
+            a3 = _cross(wx, wy, wz, wr[0], wr[1], wr[2])
+            for c in range(3):
+                accel[k, c] = (twist[p, hi, c] - twist[p, lo, c]) * inv + a1[c] + a2[c] + a3[c]
+        w2, damp = omega_n[p] ** 2, 2.0 * zeta[p] * omega_n[p]
+        for c in range(3):
+            x, xd = 0.0, 0.0
+            for k in range(n_t):
+                if k > 0:
+                    h = t_s[k] - t_s[k - 1]
+                    f0, f1 = accel[k - 1, c], accel[k, c]
+                    fm = 0.5 * (f0 + f1)
+                    k1x, k1v = xd, -w2 * x - damp * xd - f0
+                    x2, v2 = x + 0.5 * h * k1x, xd + 0.5 * h * k1v
+                    k2x, k2v = v2, -w2 * x2 - damp * v2 - fm
+                    x3, v3 = x + 0.5 * h * k2x, xd + 0.5 * h * k2v
+                    k3x, k3v = v3, -w2 * x3 - damp * v3 - fm
+                    x4, v4 = x + h * k3x, xd + h * k3v
+                    k4x, k4v = v4, -w2 * x4 - damp * v4 - f1
+                    x += (h / 6.0) * (k1x + 2.0 * k2x + 2.0 * k3x + k4x)
+                    xd += (h / 6.0) * (k1v + 2.0 * k2v + 2.0 * k3v + k4v)
+                out[p, k, c] = x  # displacement for now; momentum below
+                out[p, k, 3 + c] = xd
+        for k in range(n_t):
+            x0, x1, x2_ = out[p, k, 0], out[p, k, 1], out[p, k, 2]
+            v0, v1, v2_ = out[p, k, 3], out[p, k, 4], out[p, k, 5]
+            ang = _cross(rx + x0, ry + x1, rz + x2_, v0, v1, v2_)
+            m = mass[p]
+            out[p, k, 0], out[p, k, 1], out[p, k, 2] = m * v0, m * v1, m * v2_
+            out[p, k, 3], out[p, k, 4], out[p, k, 5] = m * ang[0], m * ang[1], m * ang[2]
+    return out
+
+
+#: the catalogue: effect name -> term class
+EFFECT_TERMS: dict[str, type[EffectTerm]] = {
+    cls.name: cls for cls in (InitialMomentum, GyroBias, GyroScale, Payload, Slosh, Delay, ExternalTorque)
+}
+
+#: the order in which measurement effects apply: ``(I + E) omega(t - d) + b``
+_MEASUREMENT_ORDER = ("delay", "gyro_scale", "gyro_bias")
+
+
+def parse_effects(spec: str | list[str] | tuple[str, ...] | None) -> list[tuple[str, dict[str, Any]]]:
+    """``"slosh,external_torque[drift=true]"`` or a list of names -> ``[(name, options), ...]`` (validated, no duplicates)."""
+    if spec is None:
+        return []
+    items = _split_spec(spec) if isinstance(spec, str) else [str(s) for s in spec]
+    out: list[tuple[str, dict[str, Any]]] = []
+    for item in items:
+        name, _, rest = item.partition("[")
+        name = name.strip()
+        if name not in EFFECT_TERMS:
+            raise SpaceIdInputError(f"effects: unknown effect {name!r}; expected one of {', '.join(EFFECT_TERMS)}")
+        if any(n == name for n, _ in out):
+            raise SpaceIdInputError(f"effects: {name!r} given twice")
+        options: dict[str, Any] = {}
+        if rest:
+            if not rest.endswith("]"):
+                raise SpaceIdInputError(f"effects: expected name[key=value,...], got {item!r}")
+            for pair in filter(None, (p.strip() for p in rest[:-1].split(","))):
+                key, eq, value = pair.partition("=")
+                if not eq or key.strip() != "drift" or name != "external_torque":
+                    raise SpaceIdInputError(f"effects: {item!r}: the only option is external_torque[drift=true|false]")
+                if value.strip().lower() not in ("true", "false"):
+                    raise SpaceIdInputError(f"effects: {item!r}: drift must be true or false")
+                options["drift"] = value.strip().lower() == "true"
+        out.append((name, options))
+    return out
+
+
+def _split_spec(spec: str) -> list[str]:
+    """Split at commas outside brackets."""
+    items, depth, current = [], 0, ""
+    for ch in spec:
+        depth += (ch == "[") - (ch == "]")
+        if ch == "," and depth == 0:
+            items.append(current)
+            current = ""
+        else:
+            current += ch
+    items.append(current)
+    return [s.strip() for s in items if s.strip()]
+
+
+def make_terms(
+    spec: str | list[str] | tuple[str, ...] | None,
+    robot: Robot,
+    tank_of: Callable[[FloatArray], FloatArray] | None = None,
+) -> list[EffectTerm]:
+    """The effect terms of ``spec`` (see :func:`parse_effects`) for ``robot``; ``tank_of`` places the slosh mass."""
+    terms: list[EffectTerm] = []
+    for name, options in parse_effects(spec):
+        if name == "slosh":
+            terms.append(Slosh(robot, tank_of))
+        else:
+            terms.append(EFFECT_TERMS[name](robot, **options))  # type: ignore[call-arg]
+    return terms
+
+
+class EffectPrediction:
+    """The base-rate prediction with effect terms (what :class:`~estimators.problem.IdentificationProblem` uses).
+
+    Args:
+        momentum_model: the per-log momentum model.
+        terms: the effect terms, in any order.
+        context: the log's :class:`EffectContext`.
+    """
+
+    def __init__(self, momentum_model: Any, terms: list[EffectTerm], context: EffectContext) -> None:
+        self.momentum_model = momentum_model
+        self.terms = terms
+        self.context = context
+        self.by_stage: dict[str, list[EffectTerm]] = {}
+        for term in terms:
+            self.by_stage.setdefault(term.stage, []).append(term)
+        order = {name: i for i, name in enumerate(_MEASUREMENT_ORDER)}
+        self.by_stage.get("measurement", []).sort(key=lambda term: order[term.name])
+        #: the prediction needs the whole log (not a sample subset) when a term looks across samples
+        self.needs_whole_log = "slosh" in self.by_stage or any(t.name == "delay" for t in terms)
+
+    def predict(
+        self,
+        base10: FloatArray,
+        payload10: FloatArray | None,
+        effect_thetas: dict[EffectTerm, FloatArray],
+        tank_m: FloatArray,
+        samples: slice | NDArray[np.intp],
+        true_rate: bool = False,
+    ) -> FloatArray:
+        """Measured base rate (P, T', 3) (rad/s, gyro axes) for composite parameters and each term's ``theta`` (P, k_e).
+
+        With ``true_rate`` the base's own rate, before the measurement effects (base body frame).
+        """
+        span = slice(None) if self.needs_whole_log else samples
+        n_p = base10.shape[0]
+        extra = None
+        for term in self.by_stage.get("momentum", []):
+            angular = term.angular_momentum(effect_thetas[term], self.context)[:, span]  # type: ignore[attr-defined]
+            extra = np.zeros((n_p, angular.shape[1], 6)) if extra is None else extra
+            extra[..., 3:] += angular
+        twist = self.momentum_model.predict_twist(base10, payload10, extra, span)
+        for term in self.by_stage.get("slosh", []):
+            assert isinstance(term, Slosh)
+            base_extra = np.zeros_like(twist) if extra is None else extra
+            for _ in range(2):  # rigid prediction -> slosh -> corrected prediction, twice
+                relative = term.momentum(twist, effect_thetas[term], tank_m, self.context)
+                twist = self.momentum_model.predict_twist(base10, payload10, base_extra - relative, span)
+        omega = np.ascontiguousarray(twist[..., 3:])
+        if true_rate:
+            return omega[:, samples] if self.needs_whole_log else omega
+        for term in self.by_stage.get("measurement", []):
+            omega = term.measure(omega, effect_thetas[term], self.context)  # type: ignore[attr-defined]
+        return omega[:, samples] if self.needs_whole_log else omega
