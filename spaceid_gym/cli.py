@@ -54,6 +54,13 @@ def _parser() -> argparse.ArgumentParser:
     sim.add_argument("--seed", type=int, default=0, help="seed of noise, initial pose, excitation and tank draw")
     sim.add_argument("--rate", type=float, default=50.0, help="sample/control rate, Hz (default 50)")
     sim.add_argument("--noise-free", action="store_true", help="exact measurements")
+    sim.add_argument(
+        "--hidden-effects",
+        default=None,
+        metavar="SPEC",
+        help="hidden physical effects, e.g. 'slosh,delay[delay_s=0.03],gyro_bias[magnitude=1e-4]' "
+        "(initial_momentum, gyro_bias, payload, slosh, delay, external_torque, gyro_scale; see spaceid_gym.effects)",
+    )
     sim.add_argument("--out", type=Path, required=True, help="dataset folder to write")
 
     ident = sub.add_parser("identify", help="identify parameters from a log and write an estimate file")
@@ -69,7 +76,32 @@ def _parser() -> argparse.ArgumentParser:
     ident.add_argument(
         "--noise-std", type=float, default=None, help="gyro noise std per sample, rad/s (default: from the residual)"
     )
+    ident.add_argument(
+        "--effects", default=None, help="effects added to the model, e.g. 'initial_momentum,gyro_bias' (see 'spaceid diagnose')"
+    )
     ident.add_argument("--out", type=Path, required=True, help="estimate JSON file to write")
+
+    cmp = sub.add_parser("compare", help="compare an identified model with the measurements: fit, residual, where it fails")
+    cmp.add_argument("--robot", required=True, help="URDF path (e.g. a dataset's robot.urdf) or shipped robot name")
+    cmp.add_argument("--log", type=Path, required=True, help="log.csv")
+    cmp.add_argument("--estimate", type=Path, required=True, help="estimate JSON written by 'spaceid identify'")
+    cmp.add_argument("--noise-std", type=float, default=None, help="gyro noise floor, rad/s (default: estimated from the data)")
+    cmp.add_argument("--out", type=Path, required=True, help="output folder: comparison.json and plots")
+
+    diag = sub.add_parser("diagnose", help="find the physical effect the model is missing")
+    _loop_arguments(diag)
+    diag.add_argument("--apply", default=None, help="'best' (the verdict's effect) or an effect name: add it and re-identify")
+    diag.add_argument(
+        "--out", type=Path, required=True, help="output folder: diagnosis.json (and estimate_after.json with --apply)"
+    )
+
+    rep = sub.add_parser("report", help="compare, diagnose, add the missing effect and write one self-contained HTML page")
+    _loop_arguments(rep)
+    rep.add_argument("--apply", default="best", help="'best' (default), an effect name, or 'none'")
+    rep.add_argument(
+        "--truth", type=Path, default=None, help="truth.json of a simulated dataset (default: next to the log, if any)"
+    )
+    rep.add_argument("--out", type=Path, required=True, help="HTML file to write (figures in <name>_figures/)")
 
     ev = sub.add_parser("evaluate", help="evaluate estimators episode by episode against the truth and the Cramér-Rao bound")
     ev.add_argument("--robot", default="paper6")
@@ -92,6 +124,17 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _loop_arguments(parser: argparse.ArgumentParser) -> None:
+    """Arguments shared by ``diagnose`` and ``report``."""
+    parser.add_argument("--robot", required=True, help="URDF path (e.g. a dataset's robot.urdf) or shipped robot name")
+    parser.add_argument("--log", type=Path, required=True, help="log.csv")
+    parser.add_argument("--params", default="fuel", help="unknowns: fuel (default) or base")
+    parser.add_argument("--effects", default=None, help="effects already in the model (kept in every candidate)")
+    parser.add_argument("--candidates", default=None, help="comma-separated effects to try (default: the whole catalogue)")
+    parser.add_argument("--estimator", default="hybrid", help="estimator of the model as it is (default hybrid)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the estimator")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``spaceid``; returns the exit code."""
     args = _parser().parse_args(argv)
@@ -102,6 +145,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             _identify(args)
         elif args.command == "evaluate":
             _evaluate(args)
+        elif args.command == "compare":
+            _compare(args)
+        elif args.command in ("diagnose", "report"):
+            _diagnose_or_report(args)
         elif args.command == "demo":
             from spaceid_gym.demo import run_demo
 
@@ -138,13 +185,16 @@ def _simulate(args: argparse.Namespace) -> None:
         seed=args.seed,
         sensors=SensorModel.noise_free() if args.noise_free else None,
         control_period_s=1.0 / args.rate,
+        hidden_effects=args.hidden_effects,
     )
     dataset = write_episode_dataset(args.out, env, {"seed": args.seed, "excitation": {"kind": "fourier", "seed": args.seed}})
     truth = dataset.truth or {}
+    effects = ", ".join(env.effects.names)
     print(
         f"wrote {dataset.path}/ ({dataset.log.n_samples} samples, {dataset.log.duration_s:.1f} s, "
         f"{time.perf_counter() - start:.2f} s wall): base mass {truth['base_mass_kg']:.2f} kg, "
         f"fuel consumed {truth['fuel_consumed_kg']:.2f} kg, tank {json.dumps([round(x, 4) for x in truth['tank_position_m']])} m"
+        + (f", hidden effects: {effects}" if effects else "")
     )
 
 
@@ -157,7 +207,7 @@ def _identify(args: argparse.Namespace) -> None:
     robot = load_robot(args.robot)
     estimator = estimator_from_spec(args.estimator, seed=args.seed)
     bounds = {k: v for k, v in (("lower", args.lower), ("upper", args.upper)) if v is not None}
-    model = IdentificationModel(robot, args.params, noise_std_rad_s=args.noise_std, **bounds)
+    model = IdentificationModel(robot, args.params, noise_std_rad_s=args.noise_std, effects=args.effects, **bounds)
     log = MeasurementLog.from_csv(args.log, n_joints=robot.n_joints)
     estimate = estimator.fit(model, log)
     estimate.write_json(args.out)
@@ -166,6 +216,73 @@ def _identify(args: argparse.Namespace) -> None:
         print(f"  {name:>18} = {value:.6g} +- {std:.3g}" if ok else f"  {name:>18}: not identifiable from this log")
     for message in estimate.insufficient_excitation:
         print(message)
+
+
+def _compare(args: argparse.Namespace) -> None:
+    from estimators.diagnostics.compare import compare, model_from_estimate
+    from estimators.diagnostics.plots import plot_correlations, plot_overlay, plot_residuals
+    from spaceid_gym.log import MeasurementLog, write_json_atomic
+    from spaceid_gym.robots import load_robot
+
+    robot = load_robot(args.robot)
+    model, theta = model_from_estimate(robot, args.estimate)
+    log = MeasurementLog.from_csv(args.log, n_joints=robot.n_joints)
+    result = compare(model, log, theta, args.noise_std)
+    args.out.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(args.out / "comparison.json", result.to_dict())
+    a = result.analysis
+    plot_overlay(
+        args.out / "overlay.png", result.t_s, result.measured, result.predicted, a.segments, title=f"Model {result.label}"
+    )
+    plot_residuals(args.out / "residuals.png", result.t_s, result.residual, a.noise_std, a.segments)
+    plot_correlations(args.out / "correlations.png", a)
+    print(result.summary())
+    print(a.structure_description())
+    print(f"wrote {args.out}/comparison.json, overlay.png, residuals.png, correlations.png")
+
+
+def _diagnose_or_report(args: argparse.Namespace) -> None:
+    from estimators.diagnostics.workflow import apply_effect, run_loop, write_report
+    from estimators.evaluation import estimator_from_spec
+    from estimators.problem import IdentificationModel
+    from spaceid_gym.log import MeasurementLog, write_json_atomic
+    from spaceid_gym.robots import load_robot
+
+    robot = load_robot(args.robot)
+    log = MeasurementLog.from_csv(args.log, n_joints=robot.n_joints)
+    model = IdentificationModel(robot, args.params, effects=args.effects)
+    estimator = estimator_from_spec(args.estimator, seed=args.seed)
+    candidates = None if args.candidates is None else [c.strip() for c in args.candidates.split(",") if c.strip()]
+    apply = None if args.apply in (None, "none") else args.apply
+    truth = _truth_next_to(args.log) if getattr(args, "truth", None) is None else _read_json(args.truth)
+    start = time.perf_counter()
+    result = run_loop(model, log, truth=truth, apply=apply, estimator=estimator, candidates=candidates)
+    print(result.summary())
+    if args.command == "report":
+        path = write_report(result, args.out)
+        print(f"wrote {path} ({time.perf_counter() - start:.1f} s)")
+        return
+    args.out.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(args.out / "diagnosis.json", result.to_dict()["diagnosis"])
+    written = ["diagnosis.json"]
+    if result.applied is not None:
+        _, estimate = apply_effect(model, log, result.applied, result.diagnosis)
+        estimate.write_json(args.out / "estimate_after.json")
+        written.append("estimate_after.json")
+    print(f"wrote {', '.join(f'{args.out}/{w}' for w in written)} ({time.perf_counter() - start:.1f} s)")
+
+
+def _truth_next_to(log_path: Path) -> dict | None:
+    """A simulated dataset's truth.json next to its log, if there is one."""
+    path = log_path.parent / "truth.json"
+    return _read_json(path) if path.is_file() else None
+
+
+def _read_json(path: Path) -> dict:
+    try:
+        return json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise SpaceIdInputError(f"{path}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
 
 
 def _evaluate(args: argparse.Namespace) -> None:

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from spaceid_gym.effects import HiddenEffects
 from spaceid_gym.envs.free_floating import FreeFloatingIDEnv
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.log import Dataset, load_dataset, write_dataset
@@ -33,15 +34,24 @@ def simulate_episode(
     seed: int,
     sensors: SensorModel | None = None,
     control_period_s: float = 0.02,
+    hidden_effects: HiddenEffects | str | None = None,
 ) -> FreeFloatingIDEnv:
     """Run one identification window in :class:`FreeFloatingIDEnv` and return the env after it.
 
     The env's :meth:`~FreeFloatingIDEnv.measurement_log` and ``fisher_information`` then describe
-    the window. All noise comes from the env's generator seeded with ``seed``.
+    the window. All noise comes from the env's generator seeded with ``seed``. ``hidden_effects``:
+    a :class:`~spaceid_gym.effects.HiddenEffects` or a spec string (drawn from the seed), see the
+    env; :func:`write_episode_dataset` then writes them to truth.json (``hidden_effects``).
     """
     if not (np.isfinite(duration_s) and duration_s > 0.0):
         raise SpaceIdInputError(f"duration: expected a positive number of seconds, got {duration_s!r}")
-    env = FreeFloatingIDEnv(robot, control_period_s=control_period_s, sensors=sensors, tank_position_m=tank_position_m)
+    env = FreeFloatingIDEnv(
+        robot,
+        control_period_s=control_period_s,
+        sensors=sensors,
+        tank_position_m=tank_position_m,
+        hidden_effects=hidden_effects,
+    )
     env.reset(seed=seed, options={"fuel_consumed_kg": fuel_consumed_kg})
     for k in range(round(duration_s / control_period_s)):
         env.step(excitation(k * control_period_s))
@@ -51,8 +61,8 @@ def simulate_episode(
 def write_episode_dataset(out_dir: str | Path, env: FreeFloatingIDEnv, extra_truth: dict[str, Any] | None = None) -> Dataset:
     """Write the env's current window as a dataset folder ``out_dir``; return it as loaded back.
 
-    ``truth.json`` holds the episode's true parameters, the noise settings and ``extra_truth``
-    (e.g. the seed and the excitation used).
+    ``truth.json`` holds the episode's true parameters (with ``hidden_effects`` when any is set),
+    the noise settings and ``extra_truth`` (e.g. the seed and the excitation used).
     """
     truth: dict[str, Any] = env.truth()
     truth.update(

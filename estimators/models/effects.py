@@ -46,7 +46,7 @@ from numpy.typing import NDArray
 
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.log import MeasurementLog
-from spaceid_gym.physics.inertia import RigidBodyInertia
+from spaceid_gym.physics.inertia import RigidBodyInertia, skew, spatial_inertia_matrix
 from spaceid_gym.robots import Robot
 from spaceid_gym.sim.lie import matrix_from_quat, so3_exp
 
@@ -336,11 +336,15 @@ class Slosh(EffectTerm):
     Equivalent-mechanical model of the first slosh mode (Abramson, NASA SP-106; Dodge 2000). The mass sits
     at the tank ``r`` (base frame; from the fuel parameters, else the full-tank CoM) when at rest and is
     part of the rigid base there; its displacement ``x`` (base axes) obeys
-    ``x'' + 2 zeta w x' + w^2 x = -a_tank(t)``, ``w = 2 pi f``, driven by the tank's inertial acceleration
-    ``a_tank = dv/dt + omega x v + domega/dt x r + omega x (omega x r)`` (base axes) of the rigid prediction.
-    Its momentum relative to the base, ``[m_s x'; m_s (r + x) x x']``, is then carried by the rest, and the
-    prediction repeats once with the slosh-corrected twist. Neglected: Coriolis on ``x'`` and the shift of
-    the composite's first moment by ``m_s x`` (both of order ``|omega| |x|``, about 1 % of the term).
+    ``x'' = -A (k x + c x') - a_tank(t)`` with ``k = m_s w^2``, ``c = 2 zeta m_s w``, ``w = 2 pi f``, driven by the
+    tank's inertial acceleration ``a_tank = dv/dt + omega x v + domega/dt x r + omega x (omega x r)`` (base axes)
+    of the prediction without the slosh mass (the rest of the robot); ``A = E / m_s + Lambda^-1`` because the spring force also pushes the rest of the
+    robot (``Lambda^-1``: its inverse operational mass at the tank, from the log's mean composite), which raises
+    the relative frequency above ``f`` (the mass's frequency against a fixed wall).
+    Its momentum relative to the base, ``[m_s x'; m_s (r + x) x x']``, is then carried by the rest, the
+    displaced mass changes the composite's first moment and inertia (a point mass at ``r + x`` instead of
+    ``r``), and the prediction is made again with both. Neglected: Coriolis on ``x'``, the coupling's change
+    with the arm's configuration, and the slosh's feedback on its own forcing beyond ``Lambda^-1``.
     Integrated with RK4 at the log's sample period, starting at rest.
 
     Ranges: ``m_s`` in ``[0, usable fuel]``, ``f`` in ``[0.05, 2]`` Hz, ``zeta`` in ``[0.005, 1]``; nominal
@@ -362,11 +366,26 @@ class Slosh(EffectTerm):
     def starts(self) -> list[FloatArray]:
         return [np.array([0.1 * self.upper[0], f, 0.05]) for f in self.START_FREQUENCIES_HZ]
 
-    def momentum(self, twist: FloatArray, theta: FloatArray, tank_m: FloatArray, context: EffectContext) -> FloatArray:
-        """The slosh mass's momentum relative to the base, ``[P; L]`` about the base origin (P, T, 6), for rigid twists (P, T, 6)."""
+    def momentum(
+        self, twist: FloatArray, theta: FloatArray, tank_m: FloatArray, composite10: FloatArray, context: EffectContext
+    ) -> tuple[FloatArray, FloatArray]:
+        """For rigid twists (P, T, 6): the slosh mass's momentum relative to the base, ``[P; L]`` about the base
+        origin (P, T, 6), and the change of the composite's 10 parameters (P, T, 10) from its displacement.
+
+        ``composite10`` (P, 10) is the robot's mean composite (base and arm, slosh mass included) over the log,
+        whose inverse inertia at the tank couples the slosh back to the base.
+        """
         omega_n = 2.0 * np.pi * theta[:, 1]
+        rest = composite10 - _point_mass10(theta[:, 0], tank_m)
+        inv_mass = np.eye(3) / np.maximum(theta[:, 0], 1e-300)[:, None, None] + _inverse_mass_at(rest, tank_m)
         return _slosh_momentum(
-            np.ascontiguousarray(twist), context.t_s, np.ascontiguousarray(tank_m), theta[:, 0], omega_n, theta[:, 2]
+            np.ascontiguousarray(twist),
+            context.t_s,
+            np.ascontiguousarray(tank_m),
+            theta[:, 0],
+            omega_n,
+            theta[:, 2],
+            np.ascontiguousarray(inv_mass),
         )
 
     def physical(self, theta: FloatArray) -> dict[str, Any]:
@@ -379,6 +398,23 @@ class Slosh(EffectTerm):
         return reasons
 
 
+def _point_mass10(mass_kg: FloatArray, position_m: FloatArray) -> FloatArray:
+    """10 parameters (P, 10) of point masses (P,) at positions (P, 3), about the origin."""
+    x, y, z = position_m[:, 0], position_m[:, 1], position_m[:, 2]
+    return mass_kg[:, None] * np.stack(
+        (np.ones_like(x), x, y, z, y * y + z * z, -x * y, x * x + z * z, -x * z, -y * z, x * x + y * y), axis=1
+    )
+
+
+def _inverse_mass_at(params10: FloatArray, point_m: FloatArray) -> FloatArray:
+    """Inverse operational mass (P, 3, 3) of bodies (P, 10) at points (P, 3): ``G M^-1 G^T``, ``G = [E, -[p]x]``."""
+    inverse = np.linalg.inv(spatial_inertia_matrix(params10))  # (P, 6, 6), twist <- wrench, base origin
+    g = np.zeros((len(point_m), 3, 6))
+    g[:, :, :3] = np.eye(3)
+    g[:, :, 3:] = -skew(point_m)
+    return g @ inverse @ np.swapaxes(g, 1, 2)
+
+
 @njit(cache=True, inline="always")
 def _cross(ax: float, ay: float, az: float, bx: float, by: float, bz: float) -> tuple[float, float, float]:
     return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
@@ -386,11 +422,18 @@ def _cross(ax: float, ay: float, az: float, bx: float, by: float, bz: float) -> 
 
 @njit(cache=True)
 def _slosh_momentum(
-    twist: FloatArray, t_s: FloatArray, tank: FloatArray, mass: FloatArray, omega_n: FloatArray, zeta: FloatArray
-) -> FloatArray:
+    twist: FloatArray,
+    t_s: FloatArray,
+    tank: FloatArray,
+    mass: FloatArray,
+    omega_n: FloatArray,
+    zeta: FloatArray,
+    inv_mass: FloatArray,
+) -> tuple[FloatArray, FloatArray]:
     """See :meth:`Slosh.momentum`; RK4 with the forcing linear between samples (each axis is the same scalar oscillator)."""
     n_p, n_t = twist.shape[0], twist.shape[1]
     out = np.zeros((n_p, n_t, 6))
+    moved = np.zeros((n_p, n_t, 10))
     accel = np.empty((n_t, 3))
     for p in range(n_p):
         rx, ry, rz = tank[p, 0], tank[p, 1], tank[p, 2]
@@ -415,25 +458,27 @@ def _slosh_momentum(
             a3 = _cross(wx, wy, wz, wr[0], wr[1], wr[2])
             for c in range(3):
                 accel[k, c] = (twist[p, hi, c] - twist[p, lo, c]) * inv + a1[c] + a2[c] + a3[c]
-        w2, damp = omega_n[p] ** 2, 2.0 * zeta[p] * omega_n[p]
-        for c in range(3):
-            x, xd = 0.0, 0.0
-            for k in range(n_t):
-                if k > 0:
-                    h = t_s[k] - t_s[k - 1]
-                    f0, f1 = accel[k - 1, c], accel[k, c]
-                    fm = 0.5 * (f0 + f1)
-                    k1x, k1v = xd, -w2 * x - damp * xd - f0
-                    x2, v2 = x + 0.5 * h * k1x, xd + 0.5 * h * k1v
-                    k2x, k2v = v2, -w2 * x2 - damp * v2 - fm
-                    x3, v3 = x + 0.5 * h * k2x, xd + 0.5 * h * k2v
-                    k3x, k3v = v3, -w2 * x3 - damp * v3 - fm
-                    x4, v4 = x + h * k3x, xd + h * k3v
-                    k4x, k4v = v4, -w2 * x4 - damp * v4 - f1
-                    x += (h / 6.0) * (k1x + 2.0 * k2x + 2.0 * k3x + k4x)
-                    xd += (h / 6.0) * (k1v + 2.0 * k2v + 2.0 * k3v + k4v)
-                out[p, k, c] = x  # displacement for now; momentum below
-                out[p, k, 3 + c] = xd
+        # x'' = -A (k x + c x') - a_tank: the spring-damper force F also accelerates the rest of the robot at
+        # the tank, by Lambda^-1 F, so the relative motion sees the inverse mass A = E / m_s + Lambda^-1
+        stiff, damp = mass[p] * omega_n[p] ** 2, 2.0 * zeta[p] * mass[p] * omega_n[p]
+        a_mat = inv_mass[p]
+        x, xd = np.zeros(3), np.zeros(3)
+        out[p, 0, :] = 0.0
+        for k in range(1, n_t):
+            h = t_s[k] - t_s[k - 1]
+            f0, f1 = accel[k - 1], accel[k]
+            fm = 0.5 * (f0 + f1)
+            k1x, k1v = xd, -a_mat @ (stiff * x + damp * xd) - f0
+            x2, v2 = x + 0.5 * h * k1x, xd + 0.5 * h * k1v
+            k2x, k2v = v2, -a_mat @ (stiff * x2 + damp * v2) - fm
+            x3, v3 = x + 0.5 * h * k2x, xd + 0.5 * h * k2v
+            k3x, k3v = v3, -a_mat @ (stiff * x3 + damp * v3) - fm
+            x4, v4 = x + h * k3x, xd + h * k3v
+            k4x, k4v = v4, -a_mat @ (stiff * x4 + damp * v4) - f1
+            x = x + (h / 6.0) * (k1x + 2.0 * k2x + 2.0 * k3x + k4x)
+            xd = xd + (h / 6.0) * (k1v + 2.0 * k2v + 2.0 * k3v + k4v)
+            out[p, k, :3] = x  # displacement for now; momentum below
+            out[p, k, 3:] = xd
         for k in range(n_t):
             x0, x1, x2_ = out[p, k, 0], out[p, k, 1], out[p, k, 2]
             v0, v1, v2_ = out[p, k, 3], out[p, k, 4], out[p, k, 5]
@@ -441,7 +486,16 @@ def _slosh_momentum(
             m = mass[p]
             out[p, k, 0], out[p, k, 1], out[p, k, 2] = m * v0, m * v1, m * v2_
             out[p, k, 3], out[p, k, 4], out[p, k, 5] = m * ang[0], m * ang[1], m * ang[2]
-    return out
+            # point mass at r + x instead of r: first moment and inertia about the origin (xx, xy, yy, xz, yz, zz)
+            px, py, pz = rx + x0, ry + x1, rz + x2_
+            moved[p, k, 1], moved[p, k, 2], moved[p, k, 3] = m * x0, m * x1, m * x2_
+            moved[p, k, 4] = m * ((py * py + pz * pz) - (ry * ry + rz * rz))
+            moved[p, k, 5] = -m * (px * py - rx * ry)
+            moved[p, k, 6] = m * ((px * px + pz * pz) - (rx * rx + rz * rz))
+            moved[p, k, 7] = -m * (px * pz - rx * rz)
+            moved[p, k, 8] = -m * (py * pz - ry * rz)
+            moved[p, k, 9] = m * ((px * px + py * py) - (rx * rx + ry * ry))
+    return out, moved
 
 
 #: the catalogue: effect name -> term class
@@ -554,10 +608,14 @@ class EffectPrediction:
         twist = self.momentum_model.predict_twist(base10, payload10, extra, span)
         for term in self.by_stage.get("slosh", []):
             assert isinstance(term, Slosh)
+            theta_slosh = effect_thetas[term]
             base_extra = np.zeros_like(twist) if extra is None else extra
-            for _ in range(2):  # rigid prediction -> slosh -> corrected prediction, twice
-                relative = term.momentum(twist, effect_thetas[term], tank_m, self.context)
-                twist = self.momentum_model.predict_twist(base10, payload10, base_extra - relative, span)
+            # the slosh is driven by the motion of the rest of the robot (the slosh mass not attached)
+            rest10 = base10 - _point_mass10(theta_slosh[:, 0], tank_m)
+            rest_twist = self.momentum_model.predict_twist(rest10, payload10, extra, span)
+            composite = self.momentum_model.mean_composite10(base10, payload10)
+            relative, moved = term.momentum(rest_twist, theta_slosh, tank_m, composite, self.context)
+            twist = self.momentum_model.predict_twist(base10, payload10, base_extra - relative, span, moved)
         omega = np.ascontiguousarray(twist[..., 3:])
         if true_rate:
             return omega[:, samples] if self.needs_whole_log else omega

@@ -98,6 +98,7 @@ class MomentumModel:
         payload10: FloatArray | None = None,
         extra_momentum: FloatArray | None = None,
         samples: Samples = slice(None),
+        extra_params10: FloatArray | None = None,
     ) -> FloatArray:
         """Base twist ``[v; omega]`` (m/s, rad/s, base axes) for P parameter sets, shape (P, T, 6).
 
@@ -106,6 +107,8 @@ class MomentumModel:
             extra_momentum: the system momentum not carried by the arm's joint motion, ``[P; L]`` about the
                 base origin in base axes, (P, T, 6) (N s, N m s), for the samples selected; ``None`` for zero.
             samples: which samples of the log (default all).
+            extra_params10: inertial parameters added to the composite per sample (P, T, 10) (a body moving inside
+                the base, e.g. a displaced slosh mass), about the base origin; ``None`` for none.
         """
         base = np.atleast_2d(np.asarray(base10, dtype=float))
         n_p = base.shape[0]
@@ -120,9 +123,31 @@ class MomentumModel:
             payload = np.atleast_2d(np.asarray(payload10, dtype=float))
             maps = self._payload_maps()
             to_base, momentum_map = maps[0][samples], maps[1][samples]
+        moving = np.zeros((1, 1, 10)) if extra_params10 is None else np.asarray(extra_params10, dtype=float)
+        if extra_params10 is not None and moving.shape != (n_p, n_t, 10):
+            raise ValueError(f"extra_params10: expected shape {(n_p, n_t, 10)}, got {moving.shape}")
         return _base_twist(
-            base, payload, payload10 is not None, extra, extra_momentum is not None, self.arm_mass_kg, *arm, to_base, momentum_map
+            base,
+            payload,
+            payload10 is not None,
+            extra,
+            extra_momentum is not None,
+            moving,
+            extra_params10 is not None,
+            self.arm_mass_kg,
+            *arm,
+            to_base,
+            momentum_map,
         )
+
+    def mean_composite10(self, base10: FloatArray, payload10: FloatArray | None = None) -> FloatArray:
+        """The whole robot's 10 parameters about the base origin (P, 10), averaged over the log's configurations."""
+        base = np.atleast_2d(np.asarray(base10, dtype=float))
+        arm = np.concatenate(([self.arm_mass_kg], self._first_moment.mean(axis=0), self._inertia6.mean(axis=0)))
+        out = base + arm
+        if payload10 is not None:
+            out = out + np.atleast_2d(payload10) @ self._payload_maps()[0].mean(axis=0).T
+        return out
 
     def predict_base_params(self, params10: FloatArray, samples: Samples = slice(None)) -> FloatArray:
         """Base rate for base parameters ``params10`` (P, 10) or (10,): (P, T, 3) or (T, 3)."""
@@ -246,6 +271,8 @@ def _base_twist(
     with_payload: bool,
     extra: FloatArray,
     with_extra: bool,
+    moving: FloatArray,
+    with_moving: bool,
     arm_mass: float,
     first: FloatArray,
     inertia6: FloatArray,
@@ -253,7 +280,7 @@ def _base_twist(
     to_base: FloatArray,
     momentum_map: FloatArray,
 ) -> FloatArray:
-    """Twist (P, T, 6) with an optional payload (P, 10) and extra momentum (P, T, 6): ``M v = extra - h_arm``."""
+    """Twist (P, T, 6) with an optional payload (P, 10), extra momentum (P, T, 6) (``M v = extra - h_arm``) and moving body (P, T, 10)."""
     n_p, n_t = params10.shape[0], first.shape[0]
     out = np.empty((n_p, n_t, 6))
     j = np.empty(6)
@@ -268,6 +295,8 @@ def _base_twist(
                 h += momentum_map[t] @ payload10[i]
             if with_extra:
                 h -= extra[i, t]
+            if with_moving:
+                comp += moving[i, t]
             for k in range(6):
                 j[k] = comp[4 + k] + inertia6[t, k]
             _twist_of_composite(

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Any, ClassVar
@@ -11,6 +12,7 @@ import numpy as np
 from gymnasium import spaces
 from numpy.typing import NDArray
 
+from spaceid_gym.effects import HiddenEffects, parse_effect_spec, parse_hidden_effects
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.information import add_information, cramer_rao_std
 from spaceid_gym.log import MeasurementLog
@@ -21,7 +23,7 @@ from spaceid_gym.robots import Robot, load_robot
 from spaceid_gym.sim.mission import FuelSchedule
 from spaceid_gym.sim.recorder import LogRecorder
 from spaceid_gym.sim.sensors import Measurement, SensorModel
-from spaceid_gym.sim.simulator import FreeFloatingSimulator
+from spaceid_gym.sim.simulator import FreeFloatingSimulator, FreeFloatingState
 
 FloatArray = NDArray[np.float64]
 
@@ -90,7 +92,21 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
 
     ## Starting State
     Joint rates zero, joint angles uniformly within +-0.3 rad of the home configuration (clipped
-    to the limits), base attitude identity, system momentum zero. Fuel state: see *Episode End*.
+    to the limits), base attitude identity, system momentum zero (unless the ``initial_momentum``
+    hidden effect is set). Fuel state: see *Episode End*.
+
+    ## Hidden effects
+    ``hidden_effects`` adds physics the nominal model leaves out (:mod:`spaceid_gym.effects`):
+    ``initial_momentum``, ``gyro_bias``, ``gyro_scale``, ``payload``, ``slosh``, ``delay``,
+    ``external_torque``. Pass a :class:`~spaceid_gym.effects.HiddenEffects` (the same every
+    episode) or a spec string such as ``"slosh,delay[delay_s=0.03],gyro_bias[magnitude=1e-4]"``,
+    drawn anew at every reset (realistic default sizes, random directions) from a generator spawned
+    from the env's ``np_random``, so the measurement noise of a seed is the same with and without
+    effects. The gyro of a ``delay`` measures the true rate at ``t - delay_s`` (the star tracker and
+    encoders are not delayed); bias and scale/misalignment apply to the gyro; the payload is held by
+    the last link (``robot`` stays the description without it). ``info["truth"]["hidden_effects"]``
+    holds the episode's settings (:meth:`HiddenEffects.to_dict`); the slosh displacement is in
+    ``env.simulator.state.slosh_m`` (truth, never observed). Slosh makes steps several times slower.
 
     ## Episode End
     The episode is truncated by the ``TimeLimit`` wrapper (registered default 3000 steps, 60 s at
@@ -101,7 +117,7 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
 
     ## Info
     ``truth``: ``fuel_consumed_kg``, ``tank_position_m``, ``base_mass_kg``, ``base_com_m``,
-    ``base_inertia_kgm2``, ``episode``; step infos add ``information_gain``, ``penalty_joint_limit``,
+    ``base_inertia_kgm2``, ``episode`` (and ``hidden_effects`` when any is set); step infos add ``information_gain``, ``penalty_joint_limit``,
     ``penalty_attitude``, ``log_det_fisher``.
 
     ## Arguments
@@ -116,7 +132,7 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     ``mdf`` in kg, ``bf`` in mm, as in :mod:`estimators.evaluation`)), ``identify_after_steps``
     (window length in steps after which the estimator runs; default :data:`WINDOW_STEPS`, the registered
     ``max_episode_steps``: pass the same number to both when changing the window, as the time limit
-    wrapper does not tell the env).
+    wrapper does not tell the env), ``hidden_effects`` (see *Hidden effects*; default none).
     The measurement log of the current episode: :meth:`measurement_log`.
     """
 
@@ -133,6 +149,7 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         render_mode: str | None = None,
         estimator: Any = None,
         identify_after_steps: int = WINDOW_STEPS,
+        hidden_effects: HiddenEffects | str | None = None,
     ) -> None:
         self.robot = robot if isinstance(robot, Robot) else load_robot(robot)
         if not (np.isfinite(control_period_s) and control_period_s > 0.0):
@@ -180,6 +197,14 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             raise SpaceIdInputError(f"identify_after_steps: expected a positive number of steps, got {identify_after_steps!r}")
         self._identify_after_steps = identify_after_steps
         self._steps = 0
+        if isinstance(hidden_effects, str):
+            parse_effect_spec(hidden_effects)  # syntax errors now, not at the first reset
+        elif hidden_effects is not None and not isinstance(hidden_effects, HiddenEffects):
+            raise SpaceIdInputError(
+                f"hidden_effects: expected a HiddenEffects, a spec string or None, got {type(hidden_effects).__name__}"
+            )
+        self.hidden_effects = hidden_effects
+        self._effects = HiddenEffects()
 
     # ------------------------------------------------------------------ gym API
     def reset(
@@ -207,18 +232,23 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         if options:
             raise SpaceIdInputError(f"reset options: unknown keys {sorted(options)}; expected fuel_consumed_kg, tank_position_m")
         base = base_after_fuel(base_full, fuel, tank)  # validates before any state changes
+        effects = self._draw_effects(fuel)
+        simulator = FreeFloatingSimulator(self.robot, base, effects=effects, tank_point_m=np.asarray(base_full.com_m) + tank)
         self._tank, self._fuel_consumed_kg, self._episode = tank, fuel, episode
+        self._effects, self.simulator = effects, simulator
         theta = np.concatenate(([self._fuel_consumed_kg], self._tank))
         self._directions = base_parameter_directions(base_params10_fuel_jacobian(base_full.com_m, theta) * self._param_scale)
-        self.simulator = FreeFloatingSimulator(self.robot, base)
         q0 = self.robot.home_configuration() + self.np_random.uniform(-0.3, 0.3, size=self.robot.n_joints)
         state = self.simulator.reset(q0_rad=np.clip(q0, self.robot.q_lower_rad, self.robot.q_upper_rad))
-        self._recorder = LogRecorder(self.sensors, self.control_period_s, self.np_random)
+        self._recorder = LogRecorder(_sensors_with_effects(self.sensors, effects), self.control_period_s, self.np_random)
+        self._gyro_delay_s = effects.delay_s or 0.0
         self._fisher, self._log_det_fisher = np.eye(4), 0.0  # prior information: one prior range per parameter
         self._fisher_update(state.composite_inertia, state.v_base_body)
         self._truth = _truth_info(self._fuel_consumed_kg, self._tank, base, self._episode)
+        if effects:
+            self._truth["hidden_effects"] = effects.to_dict()
         self._steps = 0
-        return self._observation(self._recorder.record(state)), {"truth": dict(self._truth)}
+        return self._observation(self._record(state)), {"truth": self.truth()}
 
     def step(self, action: NDArray[np.float32]) -> tuple[NDArray[np.float32], float, bool, bool, dict[str, Any]]:
         a = np.asarray(action, dtype=float)
@@ -228,7 +258,7 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             raise SpaceIdInputError(f"action: expected finite values in [-1, 1], got {a.tolist()}")
         # actions beyond [-1, 1] are clipped by the servo's rate limit
         state = self.simulator.step(a * self.robot.rate_limit_rad_s, self.control_period_s)
-        sample = self._recorder.record(state)
+        sample = self._record(state)
         gain = self._fisher_update(state.composite_inertia, state.v_base_body)
         weights = self.reward_weights
         excess = np.maximum(np.abs(state.q_rad - self._joint_mid) * self._inv_tenth_half - 9.0, 0.0)
@@ -238,7 +268,7 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             weights.attitude_per_s * self.control_period_s * float(omega @ omega) / weights.attitude_rate_ref_rad_s**2
         )
         info = {
-            "truth": dict(self._truth),
+            "truth": self.truth(),
             "information_gain": gain,
             "penalty_joint_limit": penalty_limit,
             "penalty_attitude": penalty_attitude,
@@ -257,19 +287,27 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         if self._renderer is None:
             base = self.robot.base_full
             extents = base_half_extents_from_inertia(base.mass_kg, base.inertia_com_kgm2)
-            self._renderer = RobotRenderer(self.simulator.model, extents, 480, 480)
+            self._renderer = RobotRenderer(self.simulator.arm_model, extents, 480, 480)
         state = self.simulator.state
         text = f"t = {state.t_s:6.2f} s   fuel consumed {self._fuel_consumed_kg:5.1f} kg   episode {self._episode}"
-        return self._renderer.render(state.pinocchio_configuration(), info_text=text)
+        return self._renderer.render(state.pinocchio_configuration()[: self.simulator.arm_model.nq], info_text=text)
 
     # ------------------------------------------------------------------ extras
     def measurement_log(self) -> MeasurementLog:
-        """The measurements of the current episode so far (one sample per control period)."""
+        """The measurements of the current episode so far (one sample per control period), hidden effects included."""
         return self._recorder.log()
+
+    @property
+    def effects(self) -> HiddenEffects:
+        """The current episode's hidden effects (empty without any)."""
+        return self._effects
 
     def truth(self) -> dict[str, Any]:
         """The current episode's true parameters (the same as ``info["truth"]``)."""
-        return dict(self._truth)
+        truth = dict(self._truth)
+        if "hidden_effects" in truth:  # the only nested mutable value: each caller gets its own
+            truth["hidden_effects"] = self._effects.to_dict()
+        return truth
 
     @property
     def fisher_information(self) -> FloatArray:
@@ -286,6 +324,24 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         return cramer_rao_std(self._fisher - np.eye(4)) * self._param_scale
 
     # ------------------------------------------------------------------ internals
+    def _draw_effects(self, fuel_consumed_kg: float) -> HiddenEffects:
+        """This episode's hidden effects: the fixed ones, or a fresh draw of the spec string.
+
+        The draw uses a generator spawned from ``np_random`` (spawning does not advance it), so the
+        noise and initial pose of a seed do not depend on the effects.
+        """
+        if self.hidden_effects is None:
+            return HiddenEffects()
+        if isinstance(self.hidden_effects, HiddenEffects):
+            return self.hidden_effects
+        return parse_hidden_effects(self.hidden_effects, self.np_random.spawn(1)[0], self.robot, fuel_consumed_kg)
+
+    def _record(self, state: FreeFloatingState) -> Measurement:
+        """Measure ``state``; a delayed gyro measures the state ``delay_s`` earlier."""
+        if self._gyro_delay_s > 0.0:
+            return self._recorder.record(state, self.simulator.state_at(state.t_s - self._gyro_delay_s))
+        return self._recorder.record(state)
+
     def _identify(self) -> dict[str, Any]:
         """Run the estimator on the episode's window: ``estimate`` (the estimate file's dict) and ``estimate_errors``."""
         from estimators.evaluation import quantity_errors
@@ -319,6 +375,19 @@ def _sensor_model(sensors: SensorModel | str | None) -> SensorModel:
     if sensors == "noise_free":
         return SensorModel.noise_free()
     raise SpaceIdInputError(f"sensors: expected a SensorModel, None or 'noise_free', got {sensors!r}")
+
+
+def _sensors_with_effects(sensors: SensorModel, effects: HiddenEffects) -> SensorModel:
+    """``sensors`` with the gyro bias of ``effects`` added and its scale/misalignment set (replacing the sensors' own)."""
+    bias, scale = effects.array("gyro_bias_rad_s"), effects.gyro_scale_misalignment
+    if bias is None and scale is None:
+        return sensors
+    changes: dict[str, Any] = {}
+    if bias is not None:
+        changes["gyro_bias_rad_s"] = tuple((np.asarray(sensors.gyro_bias_rad_s, dtype=float) + bias).tolist())
+    if scale is not None:
+        changes["gyro_scale_misalignment"] = scale
+    return dataclasses.replace(sensors, **changes)
 
 
 def _truth_info(fuel_consumed_kg: float, tank_m: FloatArray, base: RigidBodyInertia, episode: int) -> dict[str, Any]:

@@ -2,12 +2,10 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import numpy as np
 
 from spaceid_gym.log import MeasurementLog
-from spaceid_gym.sim.sensors import Measurement, SensorModel
+from spaceid_gym.sim.sensors import Measurement, Sampler, SensorModel
 from spaceid_gym.sim.simulator import FreeFloatingState
 
 
@@ -24,15 +22,19 @@ class LogRecorder:
         self.sensors = sensors
         self.sample_period_s = sample_period_s
         self.rng = rng
-        self._sample: Callable[[FreeFloatingState, np.random.Generator], Measurement] | None = None
+        self._sample: Sampler | None = None
         self._t: list[float] = []
         self._samples: list[Measurement] = []
 
-    def record(self, state: FreeFloatingState) -> Measurement:
-        """Measure ``state``, keep the sample and return it."""
+    def record(self, state: FreeFloatingState, gyro_state: FreeFloatingState | None = None) -> Measurement:
+        """Measure ``state``, keep the sample and return it.
+
+        ``gyro_state``: the state the gyro sees instead of ``state`` (a gyro lagging the encoders);
+        the sample keeps ``state``'s time.
+        """
         if self._sample is None:
             self._sample = self.sensors.sampler(state.q_rad.shape[0], self.sample_period_s)
-        sample = self._sample(state, self.rng)
+        sample = self._sample(state, self.rng, gyro_state)
         self._t.append(state.t_s)
         self._samples.append(sample)
         return sample

@@ -6,7 +6,8 @@ Default noise levels are those of hardware classes flown on spacecraft and space
   LN-200S class, angle random walk 0.07 deg/sqrt(h) = 2.04e-5 rad/sqrt(s). A rate output
   averaged over a period ``dt`` carries white noise of standard deviation ``ARW / sqrt(dt)``
   (1.44e-4 rad/s at 50 Hz); the model adds that noise to the instantaneous rate at the sample
-  time. An optional constant bias (rad/s), default zero.
+  time. An optional constant bias (rad/s), default zero, and an optional scale-factor/misalignment
+  matrix ``E``: ``omega_meas = (I + E) omega + bias + noise`` (default none, ``E = 0``).
 * **Joint encoders**: 20-bit absolute encoders on the joint output (resolution 6.0e-6 rad); the
   default white noise 5e-6 rad covers quantisation and electronics.
 * **Joint-rate sensors** (resolver/tachometer rate): white noise density 1.4e-5 rad/s/sqrt(Hz),
@@ -21,8 +22,8 @@ gives exact measurements.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 from numba import njit
@@ -37,6 +38,14 @@ FloatArray = NDArray[np.float64]
 _ARCSEC_RAD = math.pi / (180.0 * 3600.0)
 
 
+class Sampler(Protocol):
+    """``sample(state, rng, gyro_state=None) -> Measurement``, see :meth:`SensorModel.sampler`."""
+
+    def __call__(
+        self, state: FreeFloatingState, rng: np.random.Generator, gyro_state: FreeFloatingState | None = None
+    ) -> Measurement: ...
+
+
 @dataclass(frozen=True)
 class SensorModel:
     """Noise levels of the robot's sensors (see the module docstring for the defaults' sources).
@@ -47,6 +56,8 @@ class SensorModel:
         joint_angle_noise_rad: encoder white-noise std (rad).
         joint_rate_noise_density_rad_s_sqrt_hz: joint-rate white-noise density; std ``d/sqrt(dt)``.
         attitude_noise_rad: star-tracker noise per axis (rad).
+        gyro_scale_misalignment: ``E`` (3, 3) in ``omega_meas = (I + E) omega + bias`` (diagonal:
+            scale-factor errors, off-diagonal: misalignment), ``None`` for none.
     """
 
     gyro_arw_rad_sqrt_s: float = 0.07 * math.pi / 180.0 / 60.0
@@ -54,6 +65,7 @@ class SensorModel:
     joint_angle_noise_rad: float = 5e-6
     joint_rate_noise_density_rad_s_sqrt_hz: float = 1.4e-5
     attitude_noise_rad: float = 5.0 * _ARCSEC_RAD
+    gyro_scale_misalignment: tuple[tuple[float, float, float], ...] | None = None
 
     def __post_init__(self) -> None:
         for name in (
@@ -68,6 +80,12 @@ class SensorModel:
         bias = np.asarray(self.gyro_bias_rad_s, dtype=float)
         if bias.shape != (3,) or not np.all(np.isfinite(bias)):
             raise SpaceIdInputError(f"sensor 'gyro_bias_rad_s': expected 3 finite numbers (rad/s), got {self.gyro_bias_rad_s!r}")
+        if self.gyro_scale_misalignment is not None:
+            scale = np.asarray(self.gyro_scale_misalignment, dtype=float)
+            if scale.shape != (3, 3) or not np.all(np.isfinite(scale)):
+                raise SpaceIdInputError(
+                    f"sensor 'gyro_scale_misalignment': expected a 3x3 matrix of finite numbers, got {self.gyro_scale_misalignment!r}"
+                )
 
     @classmethod
     def noise_free(cls) -> SensorModel:
@@ -93,13 +111,15 @@ class SensorModel:
             "joint_rate_std_rad_s": self.joint_rate_std_rad_s(dt_s),
             "attitude_noise_rad": self.attitude_noise_rad,
             "sample_period_s": dt_s,
-        }
+        } | ({} if self.gyro_scale_misalignment is None else {"gyro_scale_misalignment": self.gyro_scale_misalignment})
 
-    def sampler(self, n_joints: int, dt_s: float) -> Callable[[FreeFloatingState, np.random.Generator], Measurement]:
+    def sampler(self, n_joints: int, dt_s: float) -> Sampler:
         """A function that measures a state at sample period ``dt_s``, drawing from the given generator.
 
-        Each sample draws ``2 n + 6`` standard normals in a fixed order (encoders, joint rates, gyro,
-        star tracker), so a seeded generator reproduces the same noise.
+        ``sample(state, rng, gyro_state=None)``: the gyro measures ``gyro_state`` when given (the
+        state at an earlier time, for a gyro that lags the encoders), else ``state``. Each sample
+        draws ``2 n + 6`` standard normals in a fixed order (encoders, joint rates, gyro, star
+        tracker), so a seeded generator reproduces the same noise.
         """
         n = n_joints
         scale = np.concatenate(
@@ -111,12 +131,18 @@ class SensorModel:
         )
         bias = np.concatenate((np.zeros(2 * n), np.asarray(self.gyro_bias_rad_s, dtype=float)))
         attitude_std = self.attitude_noise_rad
+        gain = None if self.gyro_scale_misalignment is None else np.eye(3) + np.asarray(self.gyro_scale_misalignment, dtype=float)
 
-        def sample(state: FreeFloatingState, rng: np.random.Generator) -> Measurement:
+        def sample(
+            state: FreeFloatingState, rng: np.random.Generator, gyro_state: FreeFloatingState | None = None
+        ) -> Measurement:
+            twist = (state if gyro_state is None else gyro_state).v_base_body
+            if gain is not None:  # only the angular part is measured
+                twist = np.concatenate((twist[:3], gain @ twist[3:]))
             y, quat = _noisy(
                 state.q_rad,
                 state.dq_rad_s,
-                state.v_base_body,
+                twist,
                 state.rot_wb,
                 rng.standard_normal(2 * n + 6),
                 scale,

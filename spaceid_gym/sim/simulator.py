@@ -18,11 +18,30 @@ Each control period is split at the servo's switch times so that every integrate
 smooth and the scheme keeps its fourth order. Momentum is conserved to round-off by construction;
 tests check it with pinocchio's centroidal momentum, check the motion against the Newton-Euler
 equations (zero base wrench) and check the integrator's order, independently.
+
+Hidden effects (:class:`~spaceid_gym.effects.HiddenEffects`)
+-----------------------------------------------------------
+* ``initial_momentum``: the default system momentum of :meth:`FreeFloatingSimulator.reset`.
+* ``external_torque``: a pure torque, inertial frame, ``tau(t) = tau0 + tau1 t``; the momentum is
+  ``L(t) = L0 + tau0 t + tau1 t^2 / 2`` (linear momentum unchanged), and every RKMK4 stage uses
+  the momentum at its own time.
+* ``payload``: the dynamics run on :meth:`Robot.with_payload`.
+* ``slosh``: a point mass ``m_s`` on three prismatic joints along the base axes at the tank point
+  (appended to the pinocchio model after the arm joints; ``m_s`` is taken out of the rigid base
+  there), pulled back by the spring-damper ``-k x - c dx``. The base twist still follows from the
+  momentum, now with the slosh rates; the slosh accelerations follow from the equations of
+  motion (CRBA + nonlinear effects) of the base and slosh coordinates with the arm accelerations
+  known from the servo, the base wrench zero (or the external torque). The attitude and the slosh
+  state ``(x, dx)`` are integrated together by the same RKMK4 (classical RK4 for ``x, dx``).
+* ``delay``: :meth:`FreeFloatingSimulator.state_at` evaluates the trajectory at an earlier time by
+  integrating from the start of the control period that contains it (the joint motion is closed form).
+* ``gyro_bias`` / ``gyro_scale`` belong to the sensors (:class:`~spaceid_gym.sim.sensors.SensorModel`).
 """
 
 from __future__ import annotations
 
 import itertools
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -30,7 +49,9 @@ import pinocchio as pin
 from numba import njit
 from numpy.typing import NDArray
 
-from spaceid_gym.physics.inertia import RigidBodyInertia
+from spaceid_gym.effects import HiddenEffects
+from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.physics.inertia import RigidBodyInertia, point_mass_inertia
 from spaceid_gym.physics.momentum import momentum_world_to_base
 from spaceid_gym.robots.robot import Robot
 from spaceid_gym.sim.lie import dexp_inv, quat_from_matrix, so3_exp
@@ -51,6 +72,8 @@ class FreeFloatingState:
         ddq_rad_s2: arm joint accelerations (n,) just before ``t_s``.
         v_base_body: base twist ``[v_lin; omega]`` in base axes (6,), m/s and rad/s.
         composite_inertia: the whole robot's spatial inertia in the base frame (``H_bb``).
+        slosh_m, slosh_rate_m_s: slosh mass displacement from its rest point and its rate (3,),
+            base axes, m and m/s; ``None`` without slosh. Truth only: never measured.
     """
 
     t_s: float
@@ -61,6 +84,8 @@ class FreeFloatingState:
     ddq_rad_s2: FloatArray
     v_base_body: FloatArray
     composite_inertia: pin.Inertia
+    slosh_m: FloatArray | None = None
+    slosh_rate_m_s: FloatArray | None = None
 
     @property
     def omega_base_body(self) -> FloatArray:
@@ -73,13 +98,27 @@ class FreeFloatingState:
         return quat_from_matrix(self.rot_wb)
 
     def pinocchio_configuration(self) -> FloatArray:
-        """pinocchio ``q``: ``[p (3), quat (x, y, z, w), q_arm]``."""
+        """pinocchio ``q``: ``[p (3), quat (x, y, z, w), q_arm]`` (+ ``slosh_m`` with slosh)."""
         w, x, y, z = self.quat_wb
-        return np.concatenate((self.p_wb_m, [x, y, z, w], self.q_rad))
+        if self.slosh_m is None:
+            return np.concatenate((self.p_wb_m, [x, y, z, w], self.q_rad))
+        return np.concatenate((self.p_wb_m, [x, y, z, w], self.q_rad, self.slosh_m))
 
     def pinocchio_velocity(self) -> FloatArray:
-        """pinocchio ``v``: ``[v_lin_body, omega_body, dq]``."""
-        return np.concatenate((self.v_base_body, self.dq_rad_s))
+        """pinocchio ``v``: ``[v_lin_body, omega_body, dq]`` (+ ``slosh_rate_m_s`` with slosh)."""
+        if self.slosh_rate_m_s is None:
+            return np.concatenate((self.v_base_body, self.dq_rad_s))
+        return np.concatenate((self.v_base_body, self.dq_rad_s, self.slosh_rate_m_s))
+
+
+@dataclass(frozen=True)
+class SloshBody:
+    """The slosh point mass: ``m`` (kg), spring ``k`` (N/m), damper ``c`` (N s/m), rest point (3,) in the base frame (m)."""
+
+    mass_kg: float
+    stiffness_n_m: float
+    damping_n_s_m: float
+    anchor_m: FloatArray
 
 
 class FreeFloatingSimulator:
@@ -88,9 +127,19 @@ class FreeFloatingSimulator:
     Args:
         robot: the robot description (its full-tank base is replaced by ``base``).
         base: the true current base mass properties (e.g. from
-            :func:`spaceid_gym.physics.fuel.base_after_fuel`).
+            :func:`spaceid_gym.physics.fuel.base_after_fuel`); with slosh, including the slosh
+            mass at rest.
         servo: the joint servo; default :func:`spaceid_gym.sim.servo.default_servo`.
         substeps: integration intervals per smooth piece of a control period (>= 1).
+        effects: hidden effects to simulate (see the module docstring); default none.
+        tank_point_m: the tank's position in the base frame (full-tank CoM + ``bf``), m, shape (3,);
+            required for ``slosh``.
+
+    Attributes:
+        model: the pinocchio model of the dynamics (true base, payload, slosh joints after the arm's),
+            matching :meth:`FreeFloatingState.pinocchio_configuration`.
+        arm_model: the same without the slosh joints (slosh mass at rest in the base), e.g. for rendering.
+        slosh: the :class:`SloshBody`, or ``None``.
     """
 
     def __init__(
@@ -99,19 +148,35 @@ class FreeFloatingSimulator:
         base: RigidBodyInertia,
         servo: RateServo | None = None,
         substeps: int = 1,
+        effects: HiddenEffects | None = None,
+        tank_point_m: FloatArray | None = None,
     ) -> None:
         if substeps < 1:
             raise ValueError(f"substeps: expected >= 1, got {substeps}")
-        self.robot = robot
-        self.model = robot.model_with_base(base)
+        self.effects = effects if effects is not None else HiddenEffects()
+        payload = self.effects.array("payload_params10")
+        self.robot = robot if payload is None else robot.with_payload(RigidBodyInertia.from_params10(payload))
+        self.arm_model = self.robot.model_with_base(base)
+        self.slosh = _slosh_body(self.effects, tank_point_m)
+        if self.slosh is None:
+            self.model = self.arm_model
+        else:
+            self.model = _model_with_slosh(self.robot, _base_without_slosh(base, self.slosh), self.slosh)
         self.data = self.model.createData()
-        self.servo = servo if servo is not None else default_servo(robot.rate_limit_rad_s)
+        self.servo = servo if servo is not None else default_servo(self.robot.rate_limit_rad_s)
         self.substeps = int(substeps)
         self.total_mass_kg = float(sum(inertia.mass for inertia in self.model.inertias))
+        torque, torque_rate = self.effects.array("external_torque_Nm"), self.effects.array("external_torque_rate_Nm_s")
+        self._torque: tuple[FloatArray, FloatArray] | None = None
+        if torque is not None or torque_rate is not None:
+            self._torque = (np.zeros(3) if torque is None else torque, np.zeros(3) if torque_rate is None else torque_rate)
         self.momentum_world = np.zeros(6)
         self._zero_momentum = True
         self._com0_world = np.zeros(3)
         self._q_full = pin.neutral(self.model)
+        delay = self.effects.delay_s
+        self._history_s = 0.0 if delay is None else float(delay)
+        self._history: deque[tuple[FreeFloatingState, FloatArray]] = deque()
         self.state = self.reset()
 
     def reset(
@@ -119,30 +184,51 @@ class FreeFloatingSimulator:
         q0_rad: FloatArray | None = None,
         rot_wb: FloatArray | None = None,
         momentum_world: FloatArray | None = None,
+        slosh_m: FloatArray | None = None,
     ) -> FreeFloatingState:
         """Start with the joints at rest and the system CoM at the inertial origin.
 
         Args:
             q0_rad: initial joint angles (n,); default the robot's home configuration.
             rot_wb: initial base attitude; default identity.
-            momentum_world: constant system momentum ``[P; L]`` about the inertial origin (6,),
-                N s and N m s; default zero (the paper's assumption). A non-zero ``L`` makes the
-                base spin (residual spin, stored wheel momentum).
+            momentum_world: system momentum ``[P; L]`` at t = 0 about the inertial origin (6,),
+                N s and N m s; default zero (the paper's assumption) or the ``initial_momentum``
+                effect. A non-zero ``L`` makes the base spin (residual spin, stored wheel momentum).
+                It stays constant unless the ``external_torque`` effect is set.
+            slosh_m: initial slosh displacement from the rest point (3,), base axes, m (with slosh;
+                default zero); the slosh mass starts at rest relative to the base.
         """
         n = self.robot.n_joints
         q0 = self.robot.home_configuration() if q0_rad is None else np.asarray(q0_rad, dtype=float)
         rot = np.eye(3) if rot_wb is None else np.asarray(rot_wb, dtype=float)
-        self.momentum_world = np.zeros(6) if momentum_world is None else np.asarray(momentum_world, dtype=float)
+        if momentum_world is not None:
+            self.momentum_world = np.asarray(momentum_world, dtype=float)
+        else:
+            self.momentum_world = self.effects.momentum_world()
         self._zero_momentum = not self.momentum_world.any()
-        terms = self._base_terms(0.0, q0, np.zeros(n))
-        twist = base_twist_at_attitude(rot, self.momentum_world, *terms[1:])
-        p = terms[3] - rot @ terms[0].lever
-        self.state = FreeFloatingState(0.0, rot, p, q0.copy(), np.zeros(n), np.zeros(n), twist, terms[0])
+        if self.slosh is not None:
+            x0 = np.zeros(3) if slosh_m is None else np.asarray(slosh_m, dtype=float)
+            if x0.shape != (3,) or not np.all(np.isfinite(x0)):
+                raise SpaceIdInputError(f"reset: slosh_m expected 3 finite numbers (m, base axes), got {slosh_m!r}")
+            twist, p = self._slosh_kinematics(0.0, rot, x0, np.zeros(3), q0, np.zeros(n))[:2]
+            composite = self.data.Ycrb[1].copy()
+            self.state = FreeFloatingState(0.0, rot, p, q0.copy(), np.zeros(n), np.zeros(n), twist, composite, x0, np.zeros(3))
+        else:
+            if slosh_m is not None:
+                raise SpaceIdInputError("reset: slosh_m needs the 'slosh' hidden effect with a slosh mass > 0")
+            terms = self._base_terms(0.0, q0, np.zeros(n))
+            twist = base_twist_at_attitude(rot, self.momentum_world, *terms[1:])
+            p = terms[3] - rot @ terms[0].lever
+            self.state = FreeFloatingState(0.0, rot, p, q0.copy(), np.zeros(n), np.zeros(n), twist, terms[0])
+        self._initial_state = self.state
+        self._history.clear()
         return self.state
 
     def base_twist(self, q_rad: FloatArray, dq_rad_s: FloatArray, rot_wb: FloatArray, t_s: float = 0.0) -> FloatArray:
-        """Base twist ``[v_lin; omega]`` (base axes) from momentum conservation, shape (6,)."""
-        return base_twist_at_attitude(rot_wb, self.momentum_world, *self._base_terms(t_s, q_rad, dq_rad_s)[1:])
+        """Base twist ``[v_lin; omega]`` (base axes) from momentum conservation, shape (6,) (slosh at rest)."""
+        if self.slosh is not None:
+            return self._slosh_kinematics(t_s, rot_wb, np.zeros(3), np.zeros(3), q_rad, dq_rad_s)[0]
+        return base_twist_at_attitude(rot_wb, self._momentum_at(t_s), *self._base_terms(t_s, q_rad, dq_rad_s)[1:])
 
     def step(self, rate_command_rad_s: FloatArray, dt_s: float) -> FreeFloatingState:
         """Hold the joint-rate command for ``dt_s`` seconds and advance the state.
@@ -150,8 +236,45 @@ class FreeFloatingSimulator:
         The command is limited by :meth:`RateServo.limit_command` (rate and joint limits).
         """
         s = self.state
+        u = self.servo.limit_command(rate_command_rad_s, s.q_rad, self.robot.q_lower_rad, self.robot.q_upper_rad, dt_s)
+        self.state = self._advance(s, u, dt_s)
+        if self._history_s > 0.0:  # keep the periods a delayed sensor may still look into
+            self._history.append((s, u))
+            while len(self._history) > 1 and self._history[1][0].t_s <= self.state.t_s - self._history_s:
+                self._history.popleft()
+        return self.state
+
+    def state_at(self, t_s: float) -> FreeFloatingState:
+        """The state at an earlier time ``t_s`` (for a sensor that lags), exactly on the simulated trajectory.
+
+        Before the start (t = 0) the system is in its initial state. Within 1 ns of a control-period boundary
+        the stored state is returned (so a whole-sample delay reproduces the log shifted, bit for
+        bit); otherwise the period containing ``t_s`` is integrated from its start with its command
+        (closed-form joint motion, RKMK4 for the rest). Only times back to ``delay_s`` of the
+        ``delay`` effect are kept.
+
+        Raises:
+            SpaceIdInputError: ``t_s`` is later than the current time or older than the kept history.
+        """
+        tol = 1e-9
+        now = self.state
+        if t_s > now.t_s + tol:
+            raise SpaceIdInputError(f"state_at: t = {t_s!r} s is after the current time {now.t_s!r} s")
+        if t_s >= now.t_s - tol:
+            return now
+        if t_s <= self._initial_state.t_s + tol:  # at rest before the start: the initial state
+            return self._initial_state
+        for start, u in reversed(self._history):
+            if t_s >= start.t_s - tol:
+                offset = t_s - start.t_s
+                return start if offset <= tol else self._advance(start, u, offset)
+        raise SpaceIdInputError(
+            f"state_at: t = {t_s!r} s is older than the kept history (the 'delay' effect sets its length, {self._history_s!r} s)"
+        )
+
+    def _advance(self, s: FreeFloatingState, u: FloatArray, dt_s: float) -> FreeFloatingState:
+        """The state ``dt_s`` after ``s`` under the (limited) command ``u``."""
         servo = self.servo
-        u = servo.limit_command(rate_command_rad_s, s.q_rad, self.robot.q_lower_rad, self.robot.q_upper_rad, dt_s)
         # split at the servo's switch times, where the joint acceleration jumps: keeps fourth order
         switches = servo.switch_times(s.dq_rad_s, u).tolist()
         cuts = sorted({0.0, dt_s, *(t for t in switches if 0.0 < t < dt_s)})
@@ -159,16 +282,101 @@ class FreeFloatingSimulator:
             cuts = sorted({float(t) for a, b in itertools.pairwise(cuts) for t in np.linspace(a, b, self.substeps + 1)})
         # joint motion at every interval's midpoint and end (t = 0 is the current state)
         times = [t for a, b in itertools.pairwise(cuts) for t in (0.5 * (a + b), b)]
+        if self.slosh is not None:
+            return self._advance_slosh(s, u, dt_s, cuts, times)
         q_t, dq_t, ddq_t = servo.motion(s.q_rad, s.dq_rad_s, u, times)
         rot, twist = s.rot_wb, s.v_base_body
         for i in range(len(cuts) - 1):
-            mid = self._base_terms(s.t_s + times[2 * i], q_t[2 * i], dq_t[2 * i])
-            end = self._base_terms(s.t_s + times[2 * i + 1], q_t[2 * i + 1], dq_t[2 * i + 1])
-            rot = rkmk4_attitude(rot, twist[3:], cuts[i + 1] - cuts[i], self.momentum_world, *mid[1:], *end[1:])
-            twist = base_twist_at_attitude(rot, self.momentum_world, *end[1:])
+            t_mid, t_end = s.t_s + times[2 * i], s.t_s + times[2 * i + 1]
+            mid = self._base_terms(t_mid, q_t[2 * i], dq_t[2 * i])
+            end = self._base_terms(t_end, q_t[2 * i + 1], dq_t[2 * i + 1])
+            h_end = self._momentum_at(t_end)
+            rot = rkmk4_attitude(rot, twist[3:], cuts[i + 1] - cuts[i], self._momentum_at(t_mid), *mid[1:], h_end, *end[1:])
+            twist = base_twist_at_attitude(rot, h_end, *end[1:])
         p = end[3] - rot @ end[0].lever
-        self.state = FreeFloatingState(s.t_s + dt_s, rot, p, q_t[-1], dq_t[-1], ddq_t[-1], twist, end[0])
-        return self.state
+        return FreeFloatingState(s.t_s + dt_s, rot, p, q_t[-1], dq_t[-1], ddq_t[-1], twist, end[0])
+
+    def _advance_slosh(
+        self, s: FreeFloatingState, u: FloatArray, dt_s: float, cuts: list[float], times: list[float]
+    ) -> FreeFloatingState:
+        """:meth:`_advance` with the slosh mass: RKMK4 on ``(R, x, dx)`` over each smooth interval."""
+        assert s.slosh_m is not None and s.slosh_rate_m_s is not None
+        q_t, dq_t, ddq_t = self.servo.motion(s.q_rad, s.dq_rad_s, u, [0.0, *times])  # row 0: just after the command
+        rot, x, v = s.rot_wb, s.slosh_m, s.slosh_rate_m_s
+        rates = self._slosh_rates(s.t_s, rot, x, v, q_t[0], dq_t[0], ddq_t[0])
+        for i in range(len(cuts) - 1):
+            h = cuts[i + 1] - cuts[i]
+            k_omega, k_x, k_v = [rates[0][3:]], [v], [rates[1]]
+            for c, j in ((0.5, 2 * i + 1), (0.5, 2 * i + 1), (1.0, 2 * i + 2)):
+                theta = c * h * k_omega[-1]
+                x_c, v_c = x + c * h * k_x[-1], v + c * h * k_v[-1]
+                stage = self._slosh_rates(s.t_s + times[j - 1], rot @ so3_exp(theta), x_c, v_c, q_t[j], dq_t[j], ddq_t[j])
+                k_omega.append(dexp_inv(theta, stage[0][3:]))
+                k_x.append(v_c)
+                k_v.append(stage[1])
+            rot = rot @ so3_exp(_rk4_sum(h, k_omega))
+            x, v = x + _rk4_sum(h, k_x), v + _rk4_sum(h, k_v)
+            end = 2 * i + 2
+            rates = self._slosh_rates(s.t_s + times[end - 1], rot, x, v, q_t[end], dq_t[end], ddq_t[end])
+        composite = self.data.Ycrb[1].copy()  # of the last evaluation: the end state
+        return FreeFloatingState(s.t_s + dt_s, rot, rates[2], q_t[-1], dq_t[-1], ddq_t[-1], rates[0], composite, x, v)
+
+    def _slosh_kinematics(
+        self, t_s: float, rot_wb: FloatArray, x_m: FloatArray, v_m_s: FloatArray, q_rad: FloatArray, dq_rad_s: FloatArray
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Base twist from the momentum with the slosh mass at ``x`` moving at ``dx``.
+
+        Leaves the CRBA of the configuration in ``self.data`` (``Ycrb[1]`` is the composite inertia).
+
+        Returns ``(twist (6,), base position p_wb (3,), joint-space mass matrix (nv, nv), upper triangle valid)``.
+        """
+        n = self.robot.n_joints
+        q_full = self._q_full
+        q_full[7 : 7 + n] = q_rad
+        q_full[7 + n :] = x_m
+        mass = pin.crba(self.model, self.data, q_full)
+        twist, p = slosh_base_twist(
+            mass, self.data.Ycrb[1].lever, self._com_world(t_s), rot_wb, self._momentum_at(t_s), dq_rad_s, v_m_s
+        )
+        return twist, p, mass
+
+    def _slosh_rates(
+        self,
+        t_s: float,
+        rot_wb: FloatArray,
+        x_m: FloatArray,
+        v_m_s: FloatArray,
+        q_rad: FloatArray,
+        dq_rad_s: FloatArray,
+        ddq_rad_s2: FloatArray,
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Base twist (6,), slosh acceleration (3,) and base position ``p_wb`` (3,) at one instant.
+
+        Solves the base and slosh rows of ``M a + nle = tau`` for the base and slosh accelerations,
+        the arm's ``ddq`` given: ``tau`` is the external torque on the base (base axes, zero without
+        the effect) and the spring-damper force ``-k x - c dx`` on the slosh joints.
+        """
+        assert self.slosh is not None
+        twist, p, mass = self._slosh_kinematics(t_s, rot_wb, x_m, v_m_s, q_rad, dq_rad_s)
+        nle = pin.nonLinearEffects(self.model, self.data, self._q_full, np.concatenate((twist, dq_rad_s, v_m_s)))
+        torque_base = np.zeros(3) if self._torque is None else rot_wb.T @ self._torque_world(t_s)
+        slosh = self.slosh
+        acc = slosh_acceleration(mass, nle, torque_base, slosh.stiffness_n_m, slosh.damping_n_s_m, x_m, v_m_s, ddq_rad_s2)
+        return twist, acc, p
+
+    def _momentum_at(self, t_s: float) -> FloatArray:
+        """System momentum ``[P; L]`` about the inertial origin at time ``t_s`` (6,): constant without external torque."""
+        if self._torque is None:
+            return self.momentum_world
+        tau0, tau1 = self._torque
+        out = self.momentum_world.copy()
+        out[3:] += tau0 * t_s + tau1 * (0.5 * t_s * t_s)
+        return out
+
+    def _torque_world(self, t_s: float) -> FloatArray:
+        """External torque at ``t_s``, inertial frame (3,), N m."""
+        assert self._torque is not None
+        return self._torque[0] + self._torque[1] * t_s
 
     def _base_terms(self, t_s: float, q_rad: FloatArray, dq_rad_s: FloatArray) -> BaseTerms:
         """What the base twist depends on at ``(t, q, dq)``, apart from the attitude.
@@ -192,6 +400,54 @@ class FreeFloatingSimulator:
 BaseTerms = tuple[pin.Inertia, FloatArray, FloatArray, FloatArray, FloatArray]
 
 
+def _rk4_sum(h: float, k: list[FloatArray]) -> FloatArray:
+    """``h/6 (k1 + 2 k2 + 2 k3 + k4)``."""
+    return (h / 6.0) * (k[0] + 2.0 * k[1] + 2.0 * k[2] + k[3])
+
+
+def _slosh_body(effects: HiddenEffects, tank_point_m: FloatArray | None) -> SloshBody | None:
+    """The slosh point mass of ``effects`` at ``tank_point_m``; ``None`` without slosh or with zero slosh mass."""
+    if effects.slosh_mass_kg is None or effects.slosh_mass_kg == 0.0:
+        return None
+    anchor = None if tank_point_m is None else np.asarray(tank_point_m, dtype=float)
+    if anchor is None or anchor.shape != (3,) or not np.all(np.isfinite(anchor)):
+        raise SpaceIdInputError(
+            f"tank_point_m: the 'slosh' effect needs the tank position (3 finite numbers, m), got {tank_point_m!r}"
+        )
+    stiffness, damping = effects.slosh_stiffness_damping()
+    return SloshBody(effects.slosh_mass_kg, stiffness, damping, anchor)
+
+
+def _base_without_slosh(base: RigidBodyInertia, slosh: SloshBody) -> RigidBodyInertia:
+    """The rigid base: ``base`` minus the slosh point mass at its rest point (mass, first moment and inertia subtract)."""
+    m, r = slosh.mass_kg, slosh.anchor_m
+    mass = base.mass_kg - m
+    if mass <= 0.0:
+        raise SpaceIdInputError(f"hidden effect 'slosh': slosh mass {m:g} kg is not below the base mass {base.mass_kg:g} kg")
+    com_base = np.asarray(base.com_m, dtype=float)
+    com = (base.mass_kg * com_base - m * r) / mass
+    # inertia about the new CoM: parallel-axis theorem on both parts
+    inertia = (
+        np.asarray(base.inertia_com_kgm2, dtype=float)
+        + base.mass_kg * point_mass_inertia(com_base - com)
+        - m * point_mass_inertia(r - com)
+    )
+    return RigidBodyInertia(mass, com, inertia).validate(
+        f"hidden effect 'slosh': the rigid base after taking {m:g} kg out at the tank {r.tolist()} m"
+    )
+
+
+def _model_with_slosh(robot: Robot, rigid_base: RigidBodyInertia, slosh: SloshBody) -> pin.Model:
+    """``robot``'s model with ``rigid_base`` and the slosh point mass on prismatic x, y, z joints (base axes) at its anchor."""
+    model = robot.model_with_base(rigid_base)
+    parent, placement = 1, pin.SE3(np.eye(3), slosh.anchor_m)
+    for axis, joint in zip("xyz", (pin.JointModelPX(), pin.JointModelPY(), pin.JointModelPZ()), strict=True):
+        parent = model.addJoint(parent, joint, placement, f"slosh_{axis}")
+        placement = pin.SE3.Identity()
+    model.appendBodyToJoint(parent, pin.Inertia(slosh.mass_kg, np.zeros(3), np.zeros((3, 3))), pin.SE3.Identity())
+    return model
+
+
 @njit(cache=True)
 def base_twist_at_attitude(
     rot_wb: FloatArray,
@@ -210,15 +466,81 @@ def base_twist_at_attitude(
 
 
 @njit(cache=True)
+def slosh_base_twist(
+    mass: FloatArray,
+    com_base_m: FloatArray,
+    com_world_m: FloatArray,
+    rot_wb: FloatArray,
+    momentum_world: FloatArray,
+    dq: FloatArray,
+    slosh_rate: FloatArray,
+) -> tuple[FloatArray, FloatArray]:
+    """Base twist (6,) and position ``p_wb`` (3,) from ``H_bb v = h_base - H_bm dq - H_bs dx`` (with the slosh joints).
+
+    ``mass``: joint-space mass matrix ``(6 + n + 3)^2`` (upper triangle read), base rows first, then the
+    arm's n, then the slosh joints'; ``com_base_m``: the system CoM in the base frame.
+    """
+    n = dq.shape[0]
+    p = com_world_m - rot_wb @ com_base_m
+    rhs = momentum_world_to_base(momentum_world, rot_wb, p)
+    h_bb = np.empty((6, 6))
+    for a in range(6):
+        for b in range(6):
+            h_bb[a, b] = mass[min(a, b), max(a, b)]
+        for k in range(n):
+            rhs[a] -= mass[a, 6 + k] * dq[k]
+        for k in range(3):
+            rhs[a] -= mass[a, 6 + n + k] * slosh_rate[k]
+    return np.linalg.solve(h_bb, rhs), p
+
+
+@njit(cache=True)
+def slosh_acceleration(
+    mass: FloatArray,
+    nle: FloatArray,
+    torque_base: FloatArray,
+    stiffness: float,
+    damping: float,
+    slosh: FloatArray,
+    slosh_rate: FloatArray,
+    ddq: FloatArray,
+) -> FloatArray:
+    """Slosh acceleration (3,) from the base and slosh rows of ``M a + nle = tau``, the arm's ``ddq`` (n,) given.
+
+    ``tau`` = ``[0, 0, 0, torque_base]`` on the base (a pure torque, base axes) and ``-k x - c dx`` on
+    the slosh joints; ``mass`` as in :func:`slosh_base_twist` (upper triangle read), ``nle`` (6 + n + 3,).
+    """
+    n = ddq.shape[0]
+    free = np.empty(9, dtype=np.int64)
+    free[:6] = np.arange(6)
+    free[6:] = np.arange(6 + n, 9 + n)
+    lhs = np.empty((9, 9))
+    rhs = np.empty(9)
+    for a in range(9):
+        i = free[a]
+        for b in range(9):
+            j = free[b]
+            lhs[a, b] = mass[min(i, j), max(i, j)]
+        coupling = 0.0
+        for k in range(n):
+            coupling += mass[min(i, 6 + k), max(i, 6 + k)] * ddq[k]
+        rhs[a] = -coupling - nle[i]
+    rhs[3:6] += torque_base
+    rhs[6:] += -stiffness * slosh - damping * slosh_rate
+    return np.linalg.solve(lhs, rhs)[6:]
+
+
+@njit(cache=True)
 def rkmk4_attitude(
     rot0: FloatArray,
     omega0: FloatArray,
     h: float,
-    momentum_world: FloatArray,
+    momentum_mid: FloatArray,
     inv_mid: FloatArray,
     arm_mid: FloatArray,
     com_base_mid: FloatArray,
     com_world_mid: FloatArray,
+    momentum_end: FloatArray,
     inv_end: FloatArray,
     arm_end: FloatArray,
     com_base_end: FloatArray,
@@ -227,20 +549,21 @@ def rkmk4_attitude(
     """One RKMK4 step of length ``h`` for the base attitude on SO(3).
 
     ``R = R0 exp([theta]x)`` with ``d theta/dt = dexp^{-1}(theta, omega_base_body)``. The body rate
-    is ``omega0`` at the start; at ``t + h/2`` and ``t + h`` it follows from the base terms there
-    (:data:`BaseTerms`) and the stage attitude. Compiled with numba (it runs every env step).
+    is ``omega0`` at the start; at ``t + h/2`` and ``t + h`` it follows from the system momentum and
+    the base terms there (:data:`BaseTerms`) and the stage attitude. Compiled with numba (it runs
+    every env step).
     """
     k1 = omega0.copy()
     th2 = 0.5 * h * k1
     k2 = dexp_inv(
-        th2, base_twist_at_attitude(rot0 @ so3_exp(th2), momentum_world, inv_mid, arm_mid, com_base_mid, com_world_mid)[3:]
+        th2, base_twist_at_attitude(rot0 @ so3_exp(th2), momentum_mid, inv_mid, arm_mid, com_base_mid, com_world_mid)[3:]
     )
     th3 = 0.5 * h * k2
     k3 = dexp_inv(
-        th3, base_twist_at_attitude(rot0 @ so3_exp(th3), momentum_world, inv_mid, arm_mid, com_base_mid, com_world_mid)[3:]
+        th3, base_twist_at_attitude(rot0 @ so3_exp(th3), momentum_mid, inv_mid, arm_mid, com_base_mid, com_world_mid)[3:]
     )
     th4 = h * k3
     k4 = dexp_inv(
-        th4, base_twist_at_attitude(rot0 @ so3_exp(th4), momentum_world, inv_end, arm_end, com_base_end, com_world_end)[3:]
+        th4, base_twist_at_attitude(rot0 @ so3_exp(th4), momentum_end, inv_end, arm_end, com_base_end, com_world_end)[3:]
     )
     return rot0 @ so3_exp((h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4))
