@@ -22,6 +22,7 @@ from scipy.optimize import least_squares
 
 from estimators.base import Estimator, SearchResult
 from estimators.options import finite_vector, positive_option
+from estimators.parameters import Parameterisation
 from estimators.problem import IdentificationProblem
 from spaceid_gym.errors import SpaceIdInputError
 
@@ -33,6 +34,12 @@ METHODS = ("trf", "dogbox", "lm")
 #: the default start: the nominal, with every coordinate closer than this fraction of the width to a bound
 #: moved to that distance (the fuel nominal mdf = 0 sits on its bound, where the tank position has no effect)
 INTERIOR_FRACTION = 0.1
+
+
+def interior_start(params: Parameterisation) -> FloatArray:
+    """The nominal (k,) with every coordinate moved at least :data:`INTERIOR_FRACTION` of its width inside the box."""
+    margin = INTERIOR_FRACTION * params.width
+    return np.clip(params.nominal, params.lower + margin, params.upper - margin)
 
 
 class _IterationLimit(Exception):
@@ -198,8 +205,7 @@ class LevenbergMarquardt(LeastSquaresPolish):
         """The start (k,) used on ``problem``: ``x0`` or the nominal moved inside the box (see ``x0``)."""
         params = problem.parameters
         if self.x0 is None:
-            margin = INTERIOR_FRACTION * params.width
-            return np.clip(params.nominal, params.lower + margin, params.upper - margin)
+            return interior_start(params)
         finite_vector("x0", self.x0, params.names)
         if self.method != "lm" and not np.all((params.lower <= self.x0) & (self.x0 <= params.upper)):
             raise SpaceIdInputError(

@@ -8,6 +8,7 @@ from __future__ import annotations
 from gymnasium.envs.registration import register, registry
 
 from spaceid_gym.envs.free_floating import WINDOW_STEPS
+from spaceid_gym.envs.manipulator import WINDOW_STEPS as MANIPULATOR_WINDOW_STEPS
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.robots import Robot, available_robots, load_robot
 
@@ -19,4 +20,10 @@ if "FreeFloatingID-v0" not in registry:
         id="FreeFloatingID-v0",
         entry_point="spaceid_gym.envs.free_floating:FreeFloatingIDEnv",
         max_episode_steps=WINDOW_STEPS,
+    )
+if "ManipulatorID-v0" not in registry:
+    register(
+        id="ManipulatorID-v0",
+        entry_point="spaceid_gym.envs.manipulator:ManipulatorIDEnv",
+        max_episode_steps=MANIPULATOR_WINDOW_STEPS,
     )

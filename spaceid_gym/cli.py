@@ -117,6 +117,14 @@ def _parser() -> argparse.ArgumentParser:
     )
     ev.add_argument("--out", type=Path, required=True, help="output folder")
 
+    suite = sub.add_parser("diagnose-suite", help="measure diagnose on simulated logs with each effect hidden, and on clean logs")
+    suite.add_argument("--robot", default="paper6")
+    suite.add_argument("--seeds", type=int, default=20, help="logs per effect (default 20)")
+    suite.add_argument("--first-seed", type=int, default=0)
+    suite.add_argument("--effects", default=None, help="comma-separated hidden effects, 'none' for clean logs (default: all)")
+    suite.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
+    suite.add_argument("--out", type=Path, required=True, help="output folder")
+
     demo = sub.add_parser("demo", help="the whole loop available so far on the built-in robot")
     demo.add_argument("--out", type=Path, default=Path("demo-output"), help="output folder (default demo-output)")
     demo.add_argument("--robot", default="paper6")
@@ -149,6 +157,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             _compare(args)
         elif args.command in ("diagnose", "report"):
             _diagnose_or_report(args)
+        elif args.command == "diagnose-suite":
+            _diagnose_suite(args)
         elif args.command == "demo":
             from spaceid_gym.demo import run_demo
 
@@ -270,6 +280,30 @@ def _diagnose_or_report(args: argparse.Namespace) -> None:
         estimate.write_json(args.out / "estimate_after.json")
         written.append("estimate_after.json")
     print(f"wrote {', '.join(f'{args.out}/{w}' for w in written)} ({time.perf_counter() - start:.1f} s)")
+
+
+def _diagnose_suite(args: argparse.Namespace) -> None:
+    from estimators.diagnostics.suite import DIAGNOSTIC_EXCITATION, SUITE_EFFECTS, run_suite, write_suite
+
+    if args.jobs < 1 or args.seeds < 1:
+        raise SpaceIdInputError(f"--jobs and --seeds: expected at least 1, got {args.jobs} and {args.seeds}")
+    effects = SUITE_EFFECTS if args.effects is None else tuple(e.strip() for e in args.effects.split(",") if e.strip())
+    unknown = [e for e in effects if e not in SUITE_EFFECTS]
+    if unknown:
+        raise SpaceIdInputError(f"--effects: unknown {unknown}; expected names from {', '.join(SUITE_EFFECTS)}")
+    start = time.perf_counter()
+    rows = run_suite(args.robot, effects, args.seeds, args.first_seed, args.jobs)
+    info = {
+        "robot": args.robot,
+        "seeds": args.seeds,
+        "first_seed": args.first_seed,
+        "effects": list(effects),
+        "excitation": DIAGNOSTIC_EXCITATION,
+        "wall_time_s": time.perf_counter() - start,
+    }
+    paths = write_suite(args.out, rows, info)
+    print(paths["table"].read_text())
+    print(f"{len(rows)} logs in {info['wall_time_s']:.0f} s; wrote {', '.join(p.name for p in paths.values())}")
 
 
 def _truth_next_to(log_path: Path) -> dict | None:

@@ -19,7 +19,9 @@ For a model (robot, parameterisation, effects already in it) and a log, :func:`d
      bound, unphysical payload, no slosh mass);
    * residual reduction, residual RMS and fit % (gyro channel);
 
-4. gives a verdict: the candidate with the lowest BIC among the significant and plausible ones, if it
+4. gives a verdict: the candidate with the lowest BIC among the significant and plausible ones (replaced by
+   a candidate that contains it as a special case, e.g. ``external_torque`` for ``initial_momentum``, when
+   that one is significantly better by its own likelihood-ratio test), if it
    explains at least :data:`EXPLAINED_FRACTION` of the baseline's excess over the noise
    (``X_baseline - (n - k)``); ``"none"`` when no candidate is significant and the baseline residual is
    white (:func:`~estimators.diagnostics.residuals.analyse_residuals`); ``"unexplained"`` otherwise, with
@@ -45,7 +47,7 @@ from estimators.base import Estimator
 from estimators.diagnostics.gyro_stellar import GyroStellarCheck
 from estimators.diagnostics.residuals import ResidualAnalysis, analyse_residuals
 from estimators.estimate import Estimate
-from estimators.least_squares import LevenbergMarquardt
+from estimators.least_squares import LevenbergMarquardt, interior_start
 from estimators.models.effects import EFFECT_TERMS
 from estimators.parameters import WithEffects
 from estimators.problem import IdentificationModel, IdentificationProblem
@@ -273,7 +275,9 @@ def _scored(
     if effect is not None:
         assert isinstance(params, WithEffects)
         term = next(t for t in params.terms if t.name == effect)
-        implausible = term.implausible(params.term_parts(theta)[term])
+        part = np.arange(params.n_params)[params.term_parts(np.arange(params.n_params))[term].astype(int)]
+        covariance = np.linalg.pinv(problem.fisher(theta), rcond=1e-12, hermitian=True)[np.ix_(part, part)]
+        implausible = term.implausible(params.term_parts(theta)[term], covariance)
     return ModelFit(
         effects=model.effects,
         effect=effect,
@@ -331,7 +335,9 @@ def diagnose(
         params = extended.parameters
         assert isinstance(params, WithEffects)
         term = params.terms[-1]
-        starts = [np.concatenate((baseline.theta, s)) for s in term.starts()]
+        # from the baseline fit, and once from the default start (a missing effect can drag the baseline far off)
+        restart = interior_start(params)[: len(baseline.theta)]
+        starts = [np.concatenate((baseline.theta, s)) for s in term.starts()] + [np.concatenate((restart, term.starts()[0]))]
         fits.append(fit_model(extended, log, starts=starts, check=check, effect=name, noise_std_rad_s=sigma0)[0])
     sigma = _score(baseline, fits, alpha)
     analysis = analyse_residuals(
@@ -342,7 +348,7 @@ def diagnose(
         log.dq_rad_s,
         noise_std=np.full(3, sigma),
     )
-    verdict, reason = _verdict(baseline, fits, analysis)
+    verdict, reason = _verdict(baseline, fits, analysis, alpha)
     fits.sort(key=lambda f: f.bic)
     return Diagnosis(verdict, baseline, fits, analysis, sigma, alpha, reason, check is not None, estimate)
 
@@ -367,11 +373,11 @@ def _score(baseline: ModelFit, fits: list[ModelFit], alpha: float) -> float:
     return math.sqrt(sigma2)
 
 
-def _verdict(baseline: ModelFit, fits: list[ModelFit], analysis: ResidualAnalysis) -> tuple[str, str]:
+def _verdict(baseline: ModelFit, fits: list[ModelFit], analysis: ResidualAnalysis, alpha: float) -> tuple[str, str]:
     """The verdict and its reason (see the module docstring)."""
     named = [f for f in fits if f.significant and f.plausible]
     if named:
-        best = min(named, key=lambda f: f.bic)
+        best = _prefer_nesting(min(named, key=lambda f: f.bic), named, alpha)
         if best.explained_fraction >= EXPLAINED_FRACTION:
             return str(best.effect), (
                 f"adding {best.effect} lowers the BIC by {-best.delta_bic:.1f} (likelihood ratio {best.lr_statistic:.1f}, "
@@ -388,6 +394,18 @@ def _verdict(baseline: ModelFit, fits: list[ModelFit], analysis: ResidualAnalysi
         rejected = "; ".join(f"{f.effect}: {', '.join(f.implausible)}" for f in significant)
         return UNEXPLAINED, f"the significant candidates are not physical ({rejected}); {analysis.structure_description()}"
     return UNEXPLAINED, f"no candidate is significant but the residual is structured: {analysis.structure_description()}"
+
+
+def _prefer_nesting(best: ModelFit, named: list[ModelFit], alpha: float) -> ModelFit:
+    """A candidate that contains ``best`` as a special case (``external_torque`` contains ``initial_momentum``) and
+    fits significantly better than it (likelihood ratio between the two at ``alpha / len(named)``) replaces it."""
+    for other in named:
+        term = EFFECT_TERMS[str(other.effect)]
+        if best.effect in term.nests:
+            statistic = best.chi2 - other.chi2
+            if chi2.sf(max(statistic, 0.0), other.n_params - best.n_params) < alpha / len(named):
+                return other
+    return best
 
 
 def _jsonable(value: Any) -> Any:

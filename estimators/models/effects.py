@@ -105,6 +105,8 @@ class EffectTerm(ABC):
     name: ClassVar[str]
     stage: ClassVar[str]
     names: tuple[str, ...]
+    #: effects this one contains as a special case (nested models)
+    nests: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self, nominal: FloatArray, lower: FloatArray, upper: FloatArray) -> None:
         self.nominal = np.asarray(nominal, dtype=float)
@@ -129,8 +131,11 @@ class EffectTerm(ABC):
     def physical(self, theta: FloatArray) -> dict[str, Any]:
         """The fitted effect as physical quantities at ``theta`` (k_e,) (keys as in ``truth.json``'s ``hidden_effects``)."""
 
-    def implausible(self, theta: FloatArray) -> list[str]:
-        """Reasons why ``theta`` (k_e,) is not physically plausible (empty if it is): by default, values on a search bound."""
+    def implausible(self, theta: FloatArray, covariance: FloatArray | None = None) -> list[str]:
+        """Reasons why ``theta`` (k_e,) is not physically plausible (empty if it is): by default, values on a search bound.
+
+        ``covariance`` (k_e, k_e), the fit's Cramér-Rao covariance, lets a term allow for the uncertainty of its test.
+        """
         width = self.upper - self.lower
         on_bound = (theta <= self.lower + 1e-6 * width) | (theta >= self.upper - 1e-6 * width)
         on_bound &= np.abs(theta - self.nominal) > 1e-6 * width  # a nominal on a bound means "off"
@@ -173,6 +178,7 @@ class ExternalTorque(EffectTerm):
 
     name = "external_torque"
     stage = "momentum"
+    nests = ("initial_momentum",)
 
     def __init__(self, robot: Robot, drift: bool = False) -> None:
         names = [f"momentum_{a}_Nms" for a in "xyz"] + [f"torque_{a}_Nm" for a in "xyz"]
@@ -308,13 +314,23 @@ class Payload(EffectTerm):
             out.update(payload_com_m=body.com_m, payload_inertia_kgm2=body.inertia_com_kgm2)
         return out
 
-    def implausible(self, theta: FloatArray) -> list[str]:
+    def implausible(self, theta: FloatArray, covariance: FloatArray | None = None) -> list[str]:
+        """Besides the bounds: the mass must be positive and the pseudo-inertia positive definite, each beyond
+        3 standard deviations of its estimate when ``covariance`` is given (a small object's inertia is barely
+        informed, and noise alone can make its estimate slightly unphysical)."""
         reasons = [r for r in super().implausible(theta) if not r.startswith(self.names[0])]  # mass >= 0 is physics below
-        if theta[0] <= 0.0:
+        cov = np.zeros((10, 10)) if covariance is None else covariance
+        if theta[0] <= -3.0 * np.sqrt(max(cov[0, 0], 0.0)) or theta[0] == 0.0:
             return [*reasons, f"payload mass {theta[0]:.3g} kg is not positive"]
-        eigenvalues = np.linalg.eigvalsh(_pseudo_inertia(theta))
-        if eigenvalues.min() <= 0.0:
-            reasons.append(f"payload inertia is not that of a physical body (pseudo-inertia eigenvalue {eigenvalues.min():.3g})")
+        eigenvalues, vectors = np.linalg.eigh(_pseudo_inertia(theta))
+        v = vectors[:, 0]
+        # d lambda_min / d params10 = v^T (d J / d params10) v (J is linear in the parameters)
+        gradient = np.array([v @ _pseudo_inertia(e) @ v for e in np.eye(10)])
+        std = float(np.sqrt(max(gradient @ cov @ gradient, 0.0)))
+        if eigenvalues[0] < -3.0 * std or (covariance is None and eigenvalues[0] <= 0.0):
+            reasons.append(
+                f"payload inertia is not that of a physical body (pseudo-inertia eigenvalue {eigenvalues[0]:.3g}, std {std:.2g})"
+            )
         return reasons
 
 
@@ -377,7 +393,7 @@ class Slosh(EffectTerm):
         """
         omega_n = 2.0 * np.pi * theta[:, 1]
         rest = composite10 - _point_mass10(theta[:, 0], tank_m)
-        inv_mass = np.eye(3) / np.maximum(theta[:, 0], 1e-300)[:, None, None] + _inverse_mass_at(rest, tank_m)
+        coupling = np.eye(3) + theta[:, 0, None, None] * _inverse_mass_at(rest, tank_m)  # m_s A, finite at m_s = 0
         return _slosh_momentum(
             np.ascontiguousarray(twist),
             context.t_s,
@@ -385,14 +401,14 @@ class Slosh(EffectTerm):
             theta[:, 0],
             omega_n,
             theta[:, 2],
-            np.ascontiguousarray(inv_mass),
+            np.ascontiguousarray(coupling),
         )
 
     def physical(self, theta: FloatArray) -> dict[str, Any]:
         return {"slosh_mass_kg": float(theta[0]), "slosh_frequency_hz": float(theta[1]), "slosh_damping_ratio": float(theta[2])}
 
-    def implausible(self, theta: FloatArray) -> list[str]:
-        reasons = super().implausible(theta)
+    def implausible(self, theta: FloatArray, covariance: FloatArray | None = None) -> list[str]:
+        reasons = super().implausible(theta, covariance)
         if theta[0] <= 0.0:
             reasons.append("slosh mass is zero")
         return reasons
@@ -428,7 +444,7 @@ def _slosh_momentum(
     mass: FloatArray,
     omega_n: FloatArray,
     zeta: FloatArray,
-    inv_mass: FloatArray,
+    coupling: FloatArray,
 ) -> tuple[FloatArray, FloatArray]:
     """See :meth:`Slosh.momentum`; RK4 with the forcing linear between samples (each axis is the same scalar oscillator)."""
     n_p, n_t = twist.shape[0], twist.shape[1]
@@ -459,9 +475,10 @@ def _slosh_momentum(
             for c in range(3):
                 accel[k, c] = (twist[p, hi, c] - twist[p, lo, c]) * inv + a1[c] + a2[c] + a3[c]
         # x'' = -A (k x + c x') - a_tank: the spring-damper force F also accelerates the rest of the robot at
-        # the tank, by Lambda^-1 F, so the relative motion sees the inverse mass A = E / m_s + Lambda^-1
-        stiff, damp = mass[p] * omega_n[p] ** 2, 2.0 * zeta[p] * mass[p] * omega_n[p]
-        a_mat = inv_mass[p]
+        # the tank, by Lambda^-1 F, so the relative motion sees the inverse mass A = E / m_s + Lambda^-1;
+        # with k = m_s w^2 and c = 2 zeta m_s w: A (k x + c x') = (E + m_s Lambda^-1) (w^2 x + 2 zeta w x')
+        stiff, damp = omega_n[p] ** 2, 2.0 * zeta[p] * omega_n[p]
+        a_mat = coupling[p]
         x, xd = np.zeros(3), np.zeros(3)
         out[p, 0, :] = 0.0
         for k in range(1, n_t):
