@@ -9,9 +9,11 @@ from estimators.base import Estimator
 
 def builtin_estimators() -> dict[str, Callable[..., Estimator]]:
     """The shipped estimators by registry name."""
+    from estimators.abc import ArtificialBeeColony, ImprovedABC
     from estimators.hybrid import HybridEstimator
     from estimators.improved_pso import ImprovedPSO
     from estimators.least_squares import LevenbergMarquardt
+    from estimators.linear_ls import OrdinaryLeastSquares, WeightedLeastSquares
     from estimators.neural import NeuralNetworkEstimator
     from estimators.pso import ParticleSwarm
     from estimators.reference import CMAES, DifferentialEvolution, PyswarmsLocalBest
@@ -25,4 +27,8 @@ def builtin_estimators() -> dict[str, Callable[..., Estimator]]:
         "de": DifferentialEvolution,
         "cma-es": CMAES,
         "pyswarms-local": PyswarmsLocalBest,
+        "ols": OrdinaryLeastSquares,
+        "wls": WeightedLeastSquares,
+        "abc": ArtificialBeeColony,
+        "improved-abc": ImprovedABC,
     }
