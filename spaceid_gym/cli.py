@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from spaceid_gym.arm.cli_commands import add_arm_simulate_arguments, run_arm_simulate
 from spaceid_gym.errors import SpaceIdInputError
 
 
@@ -125,6 +126,10 @@ def _parser() -> argparse.ArgumentParser:
     suite.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
     suite.add_argument("--out", type=Path, required=True, help="output folder")
 
+    arm = sub.add_parser("arm", help="fixed-base manipulators (UR5): simulate")
+    arm_sub = arm.add_subparsers(dest="arm_command", required=True)
+    add_arm_simulate_arguments(arm_sub.add_parser("simulate", help="simulate an arm with friction and write a dataset folder"))
+
     demo = sub.add_parser("demo", help="the whole loop available so far on the built-in robot")
     demo.add_argument("--out", type=Path, default=Path("demo-output"), help="output folder (default demo-output)")
     demo.add_argument("--robot", default="paper6")
@@ -159,6 +164,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             _diagnose_or_report(args)
         elif args.command == "diagnose-suite":
             _diagnose_suite(args)
+        elif args.command == "arm":
+            run_arm_simulate(args)
         elif args.command == "demo":
             from spaceid_gym.demo import run_demo
 

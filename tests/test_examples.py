@@ -29,3 +29,11 @@ def test_demo_runs(tmp_path: Path) -> None:
 def test_identify_fuel_runs() -> None:
     result = _run(str(EXAMPLES / "identify_fuel.py"), "--robot", "quick3", "--duration", "20")
     assert "hybrid: mdf" in result.stdout and "env loop (hybrid)" in result.stdout
+
+
+def test_find_missing_effect_runs(tmp_path: Path) -> None:
+    """The whole loop on a short log with a hidden system momentum: named, added, the residual back at the noise."""
+    report = tmp_path / "report.html"
+    result = _run(str(EXAMPLES / "find_missing_effect.py"), "--duration", "20", "--out", str(report))
+    assert "diagnosis: initial_momentum" in result.stdout and "after adding initial_momentum" in result.stdout
+    assert report.is_file() and "data:image/png;base64," in report.read_text()

@@ -132,7 +132,9 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     ``mdf`` in kg, ``bf`` in mm, as in :mod:`estimators.evaluation`)), ``identify_after_steps``
     (window length in steps after which the estimator runs; default :data:`WINDOW_STEPS`, the registered
     ``max_episode_steps``: pass the same number to both when changing the window, as the time limit
-    wrapper does not tell the env), ``hidden_effects`` (see *Hidden effects*; default none).
+    wrapper does not tell the env), ``hidden_effects`` (see *Hidden effects*; default none),
+    ``estimator_effects`` (effects the estimator's model includes, e.g. ``"initial_momentum"``; default none: the
+    paper's model, so hidden effects are missing from it and show in ``estimate_errors``).
     The measurement log of the current episode: :meth:`measurement_log`.
     """
 
@@ -150,6 +152,7 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         estimator: Any = None,
         identify_after_steps: int = WINDOW_STEPS,
         hidden_effects: HiddenEffects | str | None = None,
+        estimator_effects: str | None = None,
     ) -> None:
         self.robot = robot if isinstance(robot, Robot) else load_robot(robot)
         if not (np.isfinite(control_period_s) and control_period_s > 0.0):
@@ -193,6 +196,11 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             from estimators.registry import make_estimator  # estimators build on this package: imported on demand
 
             self._estimator = make_estimator(estimator)
+        self._estimator_effects = estimator_effects
+        if estimator_effects is not None:
+            from estimators.models.effects import parse_effects
+
+            parse_effects(estimator_effects)  # validates the spec now, not at the window's end
         if identify_after_steps < 1:
             raise SpaceIdInputError(f"identify_after_steps: expected a positive number of steps, got {identify_after_steps!r}")
         self._identify_after_steps = identify_after_steps
@@ -348,10 +356,11 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         from estimators.problem import IdentificationModel
 
         assert self._estimator is not None
-        model = IdentificationModel(self.robot, "fuel")
+        model = IdentificationModel(self.robot, "fuel", effects=self._estimator_effects)
         estimate = self._estimator.fit(model, self.measurement_log())
         theta_true = np.concatenate(([self._fuel_consumed_kg], self._tank))
-        errors = quantity_errors(model.parameters.physical(estimate.theta), model.parameters.physical(theta_true))
+        truth = IdentificationModel(self.robot, "fuel").parameters.physical(theta_true)
+        errors = quantity_errors(model.parameters.physical(estimate.theta), truth)
         return {"estimate": estimate.to_dict(), "estimate_errors": errors}
 
     def _fisher_update(self, composite: Any, twist: FloatArray) -> float:
