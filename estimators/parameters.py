@@ -34,25 +34,11 @@ from numpy.typing import NDArray
 from estimators.models.effects import EffectTerm
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.physics.fuel import FUEL_PARAMETER_NAMES, base_params10_after_fuel, base_params10_fuel_jacobian
-from spaceid_gym.physics.inertia import RigidBodyInertia
+from spaceid_gym.physics.inertia import PARAMS10_NAMES, RigidBodyInertia
 from spaceid_gym.robots import Robot
 from spaceid_gym.sim.mission import FuelSchedule
 
 FloatArray = NDArray[np.float64]
-
-#: names of the 10 inertial parameters about a frame origin (pinocchio order)
-PARAMS10_NAMES = (
-    "mass_kg",
-    "mcx_kgm",
-    "mcy_kgm",
-    "mcz_kgm",
-    "ixx_kgm2",
-    "ixy_kgm2",
-    "iyy_kgm2",
-    "ixz_kgm2",
-    "iyz_kgm2",
-    "izz_kgm2",
-)
 
 
 class Parameterisation(ABC):

@@ -88,9 +88,7 @@ class MomentumModel:
         arm = (self._first_moment[samples], self._inertia6[samples], self._momentum[samples])
         if payload10 is None:
             return _base_rate(base, self.arm_mass_kg, *arm)
-        to_base, momentum_map = self._payload_maps()
-        payload = np.atleast_2d(np.asarray(payload10, dtype=float))
-        return _base_rate_with_payload(base, payload, self.arm_mass_kg, *arm, to_base[samples], momentum_map[samples])
+        return np.ascontiguousarray(self.predict_twist(base, payload10, None, samples)[..., 3:])
 
     def predict_twist(
         self,
@@ -325,40 +323,6 @@ def _base_rate(
                 params10[i, 3] + first[t, 2],
                 j,
                 momentum[t],
-                out[i, t],
-            )
-    return out
-
-
-@njit(cache=True)
-def _base_rate_with_payload(
-    params10: FloatArray,
-    payload10: FloatArray,
-    arm_mass: float,
-    first: FloatArray,
-    inertia6: FloatArray,
-    momentum: FloatArray,
-    to_base: FloatArray,
-    momentum_map: FloatArray,
-) -> FloatArray:
-    """``omega`` (P, T, 3) with a payload (P, 10) on the last link: adds ``A_t pi`` and ``G_t pi``."""
-    n_p, n_t = params10.shape[0], first.shape[0]
-    out = np.empty((n_p, n_t, 3))
-    j = np.empty(6)
-    h = np.empty(6)
-    for i in range(n_p):
-        for t in range(n_t):
-            extra = to_base[t] @ payload10[i]
-            h[:] = momentum[t] + momentum_map[t] @ payload10[i]
-            for k in range(6):
-                j[k] = params10[i, 4 + k] + inertia6[t, k] + extra[4 + k]
-            _rate_of_composite(
-                params10[i, 0] + arm_mass + extra[0],
-                params10[i, 1] + first[t, 0] + extra[1],
-                params10[i, 2] + first[t, 1] + extra[2],
-                params10[i, 3] + first[t, 2] + extra[3],
-                j,
-                h,
                 out[i, t],
             )
     return out

@@ -39,23 +39,13 @@ from numpy.typing import NDArray
 from spaceid_gym.arm.friction import FrictionModel
 from spaceid_gym.arm.robot import ArmRobot
 from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.physics.inertia import PARAMS10_NAMES
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
 #: Name suffixes of a body's 10 inertial parameters, in pinocchio's order.
-INERTIAL_FIELDS: tuple[str, ...] = (
-    "mass_kg",
-    "mcx_kgm",
-    "mcy_kgm",
-    "mcz_kgm",
-    "ixx_kgm2",
-    "ixy_kgm2",
-    "iyy_kgm2",
-    "ixz_kgm2",
-    "iyz_kgm2",
-    "izz_kgm2",
-)
+INERTIAL_FIELDS: tuple[str, ...] = PARAMS10_NAMES
 
 
 #: A stacked-regressor column whose norm is below this fraction of the largest column's is treated as zero.

@@ -26,6 +26,21 @@ FloatArray = NDArray[np.float64]
 _INERTIA_ENTRIES = ((0, 0), (0, 1), (1, 1), (0, 2), (1, 2), (2, 2))
 
 
+#: names (with units) of a body's 10 inertial parameters about a frame origin, in pinocchio's order
+PARAMS10_NAMES: tuple[str, ...] = (
+    "mass_kg",
+    "mcx_kgm",
+    "mcy_kgm",
+    "mcz_kgm",
+    "ixx_kgm2",
+    "ixy_kgm2",
+    "iyy_kgm2",
+    "ixz_kgm2",
+    "iyz_kgm2",
+    "izz_kgm2",
+)
+
+
 def skew(v: FloatArray) -> FloatArray:
     """Cross-product matrix ``[v]x`` with ``[v]x w = v x w``; ``v`` has shape (..., 3)."""
     v = np.asarray(v, dtype=float)
