@@ -8,15 +8,14 @@ A quantity the log does not inform is ``null`` and named in ``insufficient_excit
 
 from __future__ import annotations
 
-import json
-import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+
+from spaceid_gym.log import write_json_atomic
 
 FloatArray = NDArray[np.float64]
 
@@ -117,16 +116,6 @@ class Estimate:
         return _jsonable(out)
 
     def write_json(self, path: str | Path) -> Path:
-        """Write :meth:`to_dict` to ``path`` atomically (a temporary file renamed into place)."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-        try:
-            with os.fdopen(fd, "w") as handle:
-                json.dump(self.to_dict(), handle, indent=2)
-                handle.write("\n")
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
-        return path
+        """Write :meth:`to_dict` to ``path`` atomically (a temporary file renamed into place), creating its folder."""
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        return write_json_atomic(path, self.to_dict())

@@ -28,10 +28,8 @@ a ``max_evaluations`` option gets, per setting, the evaluations the reference us
 
 from __future__ import annotations
 
-import csv
 import json
 import math
-import os
 import re
 from collections.abc import Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
@@ -46,6 +44,7 @@ from estimators.base import Estimator
 from estimators.problem import IdentificationModel, IdentificationProblem
 from estimators.registry import make_estimator
 from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.log import write_csv_atomic, write_text_atomic
 from spaceid_gym.robots import Robot, load_robot
 from spaceid_gym.sim.mission import FuelSchedule
 
@@ -296,11 +295,11 @@ def write_results(out_dir: str | Path, rows: Sequence[dict[str, Any]], settings_
     out.mkdir(parents=True, exist_ok=True)
     summary = summarise(rows)
     paths = {
-        "episodes": _write_csv(out / "episodes.csv", [{k: v for k, v in r.items() if k != "cost_history"} for r in rows]),
+        "episodes": write_csv_atomic(out / "episodes.csv", [{k: v for k, v in r.items() if k != "cost_history"} for r in rows]),
         "histories": _atomic_text(
             out / "histories.json", json.dumps([{k: r[k] for k in ("setting", "estimator", "cost_history")} for r in rows])
         ),
-        "summary_csv": _write_csv(out / "summary.csv", summary),
+        "summary_csv": write_csv_atomic(out / "summary.csv", summary),
         "summary_json": _atomic_text(out / "summary.json", json.dumps({"settings": settings_info, "summary": summary}, indent=2)),
         "table": _atomic_text(out / "table.md", markdown_table(summary)),
     }
@@ -309,20 +308,7 @@ def write_results(out_dir: str | Path, rows: Sequence[dict[str, Any]], settings_
 
 
 def _atomic_text(path: Path, text: str) -> Path:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(text if text.endswith("\n") else text + "\n")
-    os.replace(tmp, path)
-    return path
-
-
-def _write_csv(path: Path, rows: Sequence[dict[str, Any]]) -> Path:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    with tmp.open("w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
-    os.replace(tmp, path)
-    return path
+    return write_text_atomic(path, text if text.endswith("\n") else text + "\n")
 
 
 def _plots(out: Path, rows: Sequence[dict[str, Any]]) -> dict[str, Path]:

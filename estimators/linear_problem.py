@@ -40,7 +40,7 @@ from estimators.consistency import PhysicalConsistency
 from estimators.estimate import Estimate
 from estimators.models.momentum_model import Samples
 from estimators.parameters import Parameterisation
-from estimators.problem import IDENTIFIABLE_FRACTION, IdentificationProblem
+from estimators.problem import IdentificationProblem, identifiability
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.information import cramer_rao_std
 
@@ -275,13 +275,7 @@ class LinearIdentificationProblem:
         extra = dict(extra or {})
         row_std, source = self.noise_std(theta)
         std = self.crlb_std(theta, row_std)
-        identifiable = std < IDENTIFIABLE_FRACTION * params.width
-        messages = [
-            f"insufficient excitation: {name} is not identifiable from this data "
-            f"(Cramér-Rao std {'unbounded' if not np.isfinite(s) else f'{s:.3g}'} > {IDENTIFIABLE_FRACTION:g} x its search range {w:.3g})"
-            for name, s, w, ok in zip(params.names, std, params.width, identifiable, strict=True)
-            if not ok
-        ]
+        identifiable, messages = identifiability(params.names, std, params.width, "data")
         residual = self.residuals(theta, count=False)
         rows = np.bincount(self.row_group, minlength=self.n_groups)
         physical: dict[str, Any] = {

@@ -109,6 +109,21 @@ def _parameterisation(
     return WithEffects(base, terms)
 
 
+def identifiability(
+    names: tuple[str, ...], std: FloatArray, width: FloatArray, data: str = "log"
+) -> tuple[NDArray[np.bool_], list[str]]:
+    """Which parameters are identifiable (Cramér-Rao std (k,) below :data:`IDENTIFIABLE_FRACTION` of the search
+    width (k,)), and an "insufficient excitation" message for each that is not (``data`` names the data)."""
+    identifiable = std < IDENTIFIABLE_FRACTION * width
+    messages = [
+        f"insufficient excitation: {name} is not identifiable from this {data} "
+        f"(Cramér-Rao std {'unbounded' if not np.isfinite(s) else f'{s:.3g}'} > {IDENTIFIABLE_FRACTION:g} x its search range {w:.3g})"
+        for name, s, w, ok in zip(names, std, width, identifiable, strict=True)
+        if not ok
+    ]
+    return identifiable, messages
+
+
 def _tank_locator(base: Parameterisation) -> Callable[[FloatArray], FloatArray] | None:
     """Where a slosh mass sits for ``theta_base`` (P, k_base): the fuel parameters' tank (full-tank CoM + bf); else ``None`` (the default)."""
     if not isinstance(base, FuelParameters):
@@ -155,14 +170,10 @@ class IdentificationProblem:
     def predict(self, theta: FloatArray, samples: Samples = slice(None), count: bool = True) -> FloatArray:
         """Predicted base rate (P, T', 3) for ``theta`` (P, k); counted in the budget unless ``count=False``."""
         theta = np.atleast_2d(np.asarray(theta, dtype=float))
-        base10, payload10 = self.parameters.composite(theta)
         if self._effects is None:
-            omega = self.momentum.predict(base10, payload10, samples)
+            omega = self.momentum.predict(*self.parameters.composite(theta), samples)
         else:
-            params = self.parameters
-            assert isinstance(params, WithEffects)
-            tank = _slosh_tank(params, theta)
-            omega = self._effects.predict(base10, payload10, params.term_parts(theta), tank, samples)
+            omega = self._effect_rates(theta, samples)[1]
         if count:
             self.n_model_samples += omega.shape[0] * omega.shape[1]
         return omega
@@ -172,15 +183,17 @@ class IdentificationProblem:
 
         Zero without measurement effects (``gyro_bias``, ``gyro_scale``, ``delay``); not counted in the budget.
         """
-        theta = np.atleast_2d(np.asarray(theta, dtype=float))
-        measured = self.predict(theta, count=False)[0]
         if self._effects is None:
-            return np.zeros_like(measured)
+            return np.zeros((self.n_samples, 3))
+        true, measured = self._effect_rates(np.atleast_2d(np.asarray(theta, dtype=float)), slice(None))
+        return measured[0] - true[0]
+
+    def _effect_rates(self, theta: FloatArray, samples: Samples) -> tuple[FloatArray, FloatArray]:
+        """With effects: the base's own rate and the gyro's reading (P, T', 3) for ``theta`` (P, k)."""
         params = self.parameters
-        assert isinstance(params, WithEffects)
+        assert isinstance(params, WithEffects) and self._effects is not None
         base10, payload10 = params.composite(theta)
-        true = self._effects.predict(base10, payload10, params.term_parts(theta), _slosh_tank(params, theta), slice(None), True)
-        return measured - true[0]
+        return self._effects.predict(base10, payload10, params.term_parts(theta), _slosh_tank(params, theta), samples)
 
     def cost(self, theta: FloatArray, samples: Samples = slice(None), count: bool = True) -> FloatArray:
         """Mean squared residual (rad/s)^2 over ``samples`` and the 3 axes, for ``theta`` (P, k): (P,)."""
@@ -289,13 +302,7 @@ class IdentificationProblem:
         width = params.width
         scaled = self._range_scaled_fisher(theta, sigma)
         std = cramer_rao_std(scaled) * width
-        identifiable = std < IDENTIFIABLE_FRACTION * width
-        messages = [
-            f"insufficient excitation: {name} is not identifiable from this log "
-            f"(Cramér-Rao std {'unbounded' if not np.isfinite(s) else f'{s:.3g}'} > {IDENTIFIABLE_FRACTION:g} x its search range {w:.3g})"
-            for name, s, w, ok in zip(params.names, std, width, identifiable, strict=True)
-            if not ok
-        ]
+        identifiable, messages = identifiability(params.names, std, width, "log")
         physical, physical_std = _derived_with_std(params, theta, scaled, width, identifiable)
         return Estimate(
             estimator=estimator,

@@ -20,6 +20,7 @@ column and the row.
 from __future__ import annotations
 
 import csv
+import io
 import json
 import math
 import os
@@ -28,7 +29,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager, suppress
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -137,45 +138,31 @@ def _check_arrays(
         )
 
 
-@dataclass(frozen=True, eq=False, repr=False)
-class MeasurementLog:
-    """One window of measurements of a free-floating robot with ``n`` arm joints.
+class JointTimeSeries:
+    """What every log of joint measurements has: sample times ``t_s`` (T,) and joint angles ``q_rad`` (T, n).
 
-    The constructor copies the arrays to read-only float64 arrays and validates them (shapes,
-    finite values, strictly increasing time), raising :class:`SpaceIdInputError` otherwise.
-
-    Attributes:
-        t_s: time, shape (T,), s, strictly increasing, T >= 1.
-        q_rad: joint angles, shape (T, n), rad.
-        dq_rad_s: joint rates, shape (T, n), rad/s.
-        omega_base_body_rad_s: base angular velocity in the base body frame, shape (T, 3), rad/s.
-        quat_base_to_inertial_wxyz: base attitude, shape (T, 4), unit quaternion ``(w, x, y, z)``
-            rotating base-frame vectors into the inertial frame; ``None`` if not measured.
+    Shared by :class:`MeasurementLog` and :class:`spaceid_gym.arm.log.ArmLog` (frozen dataclasses).
     """
 
     t_s: FloatArray
     q_rad: FloatArray
-    dq_rad_s: FloatArray
-    omega_base_body_rad_s: FloatArray
-    quat_base_to_inertial_wxyz: FloatArray | None = None
 
-    def __post_init__(self) -> None:
-        for name in ("t_s", "q_rad", "dq_rad_s", "omega_base_body_rad_s", "quat_base_to_inertial_wxyz"):
+    def _freeze_arrays(self, fields: tuple[str, ...], optional: tuple[str, ...], source: str) -> None:
+        """Replace each field by a read-only float64 copy (``optional`` ones may be ``None``)."""
+        for name in fields:
             value = getattr(self, name)
-            if value is None and name == "quat_base_to_inertial_wxyz":
+            if value is None and name in optional:
                 continue
             try:
                 array = np.array(value, dtype=np.float64)
             except (TypeError, ValueError) as exc:
-                raise SpaceIdInputError(f"MeasurementLog: {name} must be an array of numbers ({exc})") from exc
+                raise SpaceIdInputError(f"{source}: {name} must be an array of numbers ({exc})") from exc
             array.flags.writeable = False
             object.__setattr__(self, name, array)
-        self.validate("MeasurementLog")
 
-    # ------------------------------------------------------------------ properties
     @property
     def n_joints(self) -> int:
-        """Number of arm joints ``n``."""
+        """Number of joints ``n``."""
         return int(self.q_rad.shape[1])
 
     @property
@@ -197,6 +184,34 @@ class MeasurementLog:
 
     def __len__(self) -> int:
         return self.n_samples
+
+
+@dataclass(frozen=True, eq=False, repr=False)
+class MeasurementLog(JointTimeSeries):
+    """One window of measurements of a free-floating robot with ``n`` arm joints.
+
+    The constructor copies the arrays to read-only float64 arrays and validates them (shapes,
+    finite values, strictly increasing time), raising :class:`SpaceIdInputError` otherwise.
+
+    Attributes:
+        t_s: time, shape (T,), s, strictly increasing, T >= 1.
+        q_rad: joint angles, shape (T, n), rad.
+        dq_rad_s: joint rates, shape (T, n), rad/s.
+        omega_base_body_rad_s: base angular velocity in the base body frame, shape (T, 3), rad/s.
+        quat_base_to_inertial_wxyz: base attitude, shape (T, 4), unit quaternion ``(w, x, y, z)``
+            rotating base-frame vectors into the inertial frame; ``None`` if not measured.
+    """
+
+    t_s: FloatArray
+    q_rad: FloatArray
+    dq_rad_s: FloatArray
+    omega_base_body_rad_s: FloatArray
+    quat_base_to_inertial_wxyz: FloatArray | None = None
+
+    def __post_init__(self) -> None:
+        fields = ("t_s", "q_rad", "dq_rad_s", "omega_base_body_rad_s", "quat_base_to_inertial_wxyz")
+        self._freeze_arrays(fields, ("quat_base_to_inertial_wxyz",), "MeasurementLog")
+        self.validate("MeasurementLog")
 
     def __repr__(self) -> str:
         quat = "yes" if self.quat_base_to_inertial_wxyz is not None else "no"
@@ -269,7 +284,7 @@ class MeasurementLog:
         """
         path = Path(path)
         header = _column_names(self.n_joints, self.quat_base_to_inertial_wxyz is not None)
-        with _atomic_open(path) as f:
+        with atomic_open(path) as f:
             f.write(",".join(header) + "\n")
             for values in self._table().tolist():
                 f.write(_format_row(values))
@@ -434,14 +449,16 @@ def _parse_header(path: Path, header: list[str], line: int) -> tuple[int, bool]:
 
 # ---------------------------------------------------------------------- atomic writes
 @contextmanager
-def _atomic_open(path: Path) -> Iterator[TextIO]:
-    """Open a temporary file next to ``path`` for writing; on success rename it over ``path``.
+def atomic_open(path: PathLike, binary: bool = False) -> Iterator[Any]:
+    """Open a temporary file next to ``path`` for writing (text UTF-8, or ``binary``); on success rename it over ``path``.
 
-    On any exception the temporary file is removed and ``path`` keeps its previous content.
+    On any exception the temporary file is removed and ``path`` keeps its previous content (or stays
+    absent); a missing or unwritable folder raises :class:`SpaceIdInputError`.
     """
+    path = Path(path)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
     try:
-        f = open(tmp, "x", encoding="utf-8", newline="\n")  # noqa: SIM115 - closed by the with below
+        f = open(tmp, "xb") if binary else open(tmp, "x", encoding="utf-8", newline="\n")  # noqa: SIM115 - closed below
     except OSError as exc:
         raise SpaceIdInputError(f"{path}: cannot write: {exc.strerror}") from exc
     try:
@@ -456,23 +473,36 @@ def _atomic_open(path: Path) -> Iterator[TextIO]:
         raise
 
 
-def _write_text_atomic(path: Path, text: str) -> None:
-    with _atomic_open(path) as f:
-        f.write(text)
-
-
 def write_text_atomic(path: PathLike, text: str) -> Path:
     """Write ``text`` to ``path`` atomically (a temporary file renamed into place)."""
-    path = Path(path)
-    _write_text_atomic(path, text)
-    return path
+    with atomic_open(path) as f:
+        f.write(text)
+    return Path(path)
+
+
+def write_bytes_atomic(path: PathLike, data: bytes) -> Path:
+    """Write ``data`` to ``path`` atomically (a temporary file renamed into place), creating its folder."""
+    try:
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise SpaceIdInputError(f"{path}: cannot write: cannot create its folder ({exc.strerror})") from exc
+    with atomic_open(path, binary=True) as f:
+        f.write(data)
+    return Path(path)
+
+
+def write_csv_atomic(path: PathLike, rows: list[dict[str, Any]]) -> Path:
+    """Write dict rows (columns: the first row's keys) as CSV to ``path`` atomically."""
+    text = io.StringIO()
+    writer = csv.DictWriter(text, fieldnames=list(rows[0]), lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    return write_text_atomic(path, text.getvalue())
 
 
 def write_json_atomic(path: PathLike, data: dict[str, Any]) -> Path:
     """Write ``data`` as indented JSON to ``path`` atomically (numpy arrays and scalars become lists and numbers, NaN null)."""
-    path = Path(path)
-    _write_text_atomic(path, json.dumps(_to_json(data, "", nonfinite_as_null=True), indent=2) + "\n")
-    return path
+    return write_text_atomic(path, json.dumps(_to_json(data, "", nonfinite_as_null=True), indent=2) + "\n")
 
 
 # ---------------------------------------------------------------------- dataset folders
@@ -547,13 +577,13 @@ def write_dataset(directory: PathLike, log: MeasurementLog, urdf_text: str, trut
     except OSError as exc:
         raise SpaceIdInputError(f"{directory}: cannot create the dataset folder: {exc.strerror}") from exc
     log.to_csv(directory / LOG_FILENAME)
-    _write_text_atomic(directory / URDF_FILENAME, urdf_text)
+    write_text_atomic(directory / URDF_FILENAME, urdf_text)
     truth_path = directory / TRUTH_FILENAME
     if truth_text is None:
         with suppress(FileNotFoundError):
             truth_path.unlink()
     else:
-        _write_text_atomic(truth_path, truth_text)
+        write_text_atomic(truth_path, truth_text)
     return directory
 
 

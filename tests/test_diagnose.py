@@ -17,7 +17,6 @@ from estimators.registry import make_estimator
 from spaceid_gym.datasets import simulate_episode
 from spaceid_gym.effects import HiddenEffects
 from spaceid_gym.errors import SpaceIdInputError
-from spaceid_gym.log import MeasurementLog
 from spaceid_gym.robots import Robot
 
 THETA = np.array([70.0, 0.2, -0.25, 0.15])
@@ -112,4 +111,3 @@ def test_compare_errors_name_the_problem(paper6: Robot, bias_log, tmp_path) -> N
         model_from_estimate(paper6, {"parameterisation": "fuel", "parameters": {"fuel_consumed_kg": 1.0}})
     with pytest.raises(SpaceIdInputError, match="expected 4 values"):
         compare(IdentificationModel(paper6, "fuel"), log, np.zeros(3))
-    assert isinstance(log, MeasurementLog)

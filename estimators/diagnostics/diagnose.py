@@ -160,10 +160,14 @@ class Diagnosis:
     attitude_check: bool
     baseline_estimate: Estimate | None = field(default=None, repr=False)
 
+    def fit_of(self, effect: str | None) -> ModelFit | None:
+        """The candidate fit of ``effect``, if it was tried."""
+        return next((c for c in self.candidates if c.effect == effect), None)
+
     @property
     def best(self) -> ModelFit | None:
         """The named candidate, if the verdict names one."""
-        return next((c for c in self.candidates if c.effect == self.verdict), None)
+        return self.fit_of(self.verdict)
 
     def to_dict(self) -> dict[str, Any]:
         """The ``diagnose --out`` JSON."""

@@ -21,7 +21,7 @@ from matplotlib.figure import Figure
 from numpy.typing import ArrayLike
 from scipy import stats
 
-from estimators.diagnostics.report import PathLike, write_bytes_atomic
+from estimators.diagnostics.report import PathLike
 from estimators.diagnostics.residuals import (
     FloatArray,
     ResidualAnalysis,
@@ -31,6 +31,7 @@ from estimators.diagnostics.residuals import (
     white_spectrum_level,
 )
 from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.log import write_bytes_atomic
 
 _SEGMENT_COLOUR = "tab:red"
 _DPI = 100

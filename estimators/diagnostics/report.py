@@ -5,7 +5,7 @@ embedded as base64 ``data:`` URIs, the style is a short inline ``<style>`` block
 JavaScript. All text (headings, paragraphs, table cells, captions) is escaped with
 :func:`html.escape`, so names and messages from a user's files cannot inject markup.
 
-Files are written atomically (:func:`write_bytes_atomic`: a temporary file in the target's directory,
+Files are written atomically (:func:`spaceid_gym.log.write_bytes_atomic`: a temporary file in the target's directory,
 then ``os.replace``), so a failure never leaves a partial report (or plot) behind and an existing file
 is either kept or fully replaced.
 """
@@ -16,7 +16,6 @@ import base64
 import html
 import math
 import os
-import secrets
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -24,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.log import write_bytes_atomic
 
 PathLike = str | os.PathLike[str]
 
@@ -45,32 +45,6 @@ figure img { max-width: 100%; height: auto; border: 1px solid #ddd; }
 figcaption { font-size: 0.9em; color: #444; }
 pre { background: #f4f4f8; padding: 0.8em; overflow-x: auto; font-size: 0.88em; }
 """
-
-
-def write_bytes_atomic(path: PathLike, data: bytes) -> Path:
-    """Write ``data`` to ``path`` atomically (temporary file in the same directory, then ``os.replace``).
-
-    Creates the parent directory. The file gets the usual permissions (umask applied). On any failure
-    the temporary file is removed and ``path`` is left as it was (absent, or its previous content);
-    a directory that cannot be written raises :class:`SpaceIdInputError` naming it.
-    """
-    target = Path(path)
-    tmp = target.with_name(f".{target.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
-    try:
-        target.parent.mkdir(parents=True, exist_ok=True)
-        handle = open(tmp, "xb")  # noqa: SIM115 - closed by the with below
-    except OSError as exc:
-        raise SpaceIdInputError(f"{target}: cannot write: {exc.strerror}") from exc
-    try:
-        with handle:
-            handle.write(data)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(tmp, target)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    return target
 
 
 def _format_cell(value: Any, float_format: str) -> tuple[str, bool]:

@@ -16,8 +16,6 @@ errors in Cramér-Rao standard deviations, before and after.
 
 from __future__ import annotations
 
-import csv
-import io
 import math
 import time
 from collections import Counter
@@ -163,17 +161,13 @@ def markdown_table(summary: list[dict[str, Any]]) -> str:
 
 def write_suite(out: str | Path, rows: list[dict[str, Any]], info: dict[str, Any]) -> dict[str, Path]:
     """``suite.csv``, ``summary.json`` and ``table.md`` in ``out``."""
-    from spaceid_gym.log import write_json_atomic, write_text_atomic
+    from spaceid_gym.log import write_csv_atomic, write_json_atomic, write_text_atomic
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     summary = summarise(rows)
-    text = io.StringIO()
-    writer = csv.DictWriter(text, fieldnames=list(rows[0]), lineterminator="\n")
-    writer.writeheader()
-    writer.writerows(rows)
     return {
-        "csv": write_text_atomic(out / "suite.csv", text.getvalue()),
+        "csv": write_csv_atomic(out / "suite.csv", rows),
         "json": write_json_atomic(out / "summary.json", {"info": info, "summary": summary}),
         "table": write_text_atomic(out / "table.md", markdown_table(summary)),
     }

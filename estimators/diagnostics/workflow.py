@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from estimators.base import Estimator
 from estimators.diagnostics.compare import Comparison, compare
-from estimators.diagnostics.diagnose import Diagnosis, ModelFit, candidate_model, diagnose
+from estimators.diagnostics.diagnose import Diagnosis, candidate_model, diagnose
 from estimators.diagnostics.plots import plot_before_after, plot_correlations, plot_overlay, plot_ranking, plot_residuals
 from estimators.diagnostics.report import HtmlReport
 from estimators.estimate import Estimate
@@ -44,7 +44,7 @@ def apply_effect(
     from estimators.registry import make_estimator
 
     extended = candidate_model(model, effect)
-    fit = None if diagnosis is None else next((c for c in diagnosis.candidates if c.effect == effect), None)
+    fit = None if diagnosis is None else diagnosis.fit_of(effect)
     if fit is None:
         return extended, (estimator or make_estimator("hybrid")).fit(extended, log)
     problem = extended.problem(log)
@@ -248,7 +248,7 @@ def write_report(result: LoopResult, path: str | Path, title: str = "Model again
         )
         page.add_image(chart, "Residual RMS over the noise floor per axis.")
         page.add_paragraph(after.analysis.structure_description())
-        fitted = _fitted_effect(d, result.applied)
+        fitted = d.fit_of(result.applied)
         if fitted is not None:
             page.add_table(
                 [{"quantity": k, "value": _text(v)} for k, v in fitted.physical.items() if k not in _base_keys()],
@@ -258,10 +258,6 @@ def write_report(result: LoopResult, path: str | Path, title: str = "Model again
         if errors is not None:
             page.add_table(errors.rows(), f"Fuel unknowns against the truth, {label}.")
     return page.write(path)
-
-
-def _fitted_effect(diagnosis: Diagnosis, effect: str | None) -> ModelFit | None:
-    return next((c for c in diagnosis.candidates if c.effect == effect), None)
 
 
 def _base_keys() -> set[str]:

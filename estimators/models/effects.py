@@ -594,13 +594,12 @@ class EffectPrediction:
         self.momentum_model = momentum_model
         self.terms = terms
         self.context = context
-        self.by_stage: dict[str, list[EffectTerm]] = {}
-        for term in terms:
-            self.by_stage.setdefault(term.stage, []).append(term)
+        self.momentum_terms = [t for t in terms if t.stage == "momentum"]
+        self.slosh = next((t for t in terms if isinstance(t, Slosh)), None)
         order = {name: i for i, name in enumerate(_MEASUREMENT_ORDER)}
-        self.by_stage.get("measurement", []).sort(key=lambda term: order[term.name])
+        self.measurement_terms = sorted((t for t in terms if t.stage == "measurement"), key=lambda t: order[t.name])
         #: the prediction needs the whole log (not a sample subset) when a term looks across samples
-        self.needs_whole_log = "slosh" in self.by_stage or any(t.name == "delay" for t in terms)
+        self.needs_whole_log = self.slosh is not None or any(t.name == "delay" for t in terms)
 
     def predict(
         self,
@@ -609,33 +608,31 @@ class EffectPrediction:
         effect_thetas: dict[EffectTerm, FloatArray],
         tank_m: FloatArray,
         samples: slice | NDArray[np.intp],
-        true_rate: bool = False,
-    ) -> FloatArray:
-        """Measured base rate (P, T', 3) (rad/s, gyro axes) for composite parameters and each term's ``theta`` (P, k_e).
-
-        With ``true_rate`` the base's own rate, before the measurement effects (base body frame).
-        """
+    ) -> tuple[FloatArray, FloatArray]:
+        """For composite parameters and each term's ``theta`` (P, k_e): the base's own rate (base body frame) and
+        what the gyro reads (after the measurement effects), each (P, T', 3), rad/s."""
         span = slice(None) if self.needs_whole_log else samples
         n_p = base10.shape[0]
         extra = None
-        for term in self.by_stage.get("momentum", []):
+        for term in self.momentum_terms:
             angular = term.angular_momentum(effect_thetas[term], self.context)[:, span]  # type: ignore[attr-defined]
             extra = np.zeros((n_p, angular.shape[1], 6)) if extra is None else extra
             extra[..., 3:] += angular
-        twist = self.momentum_model.predict_twist(base10, payload10, extra, span)
-        for term in self.by_stage.get("slosh", []):
-            assert isinstance(term, Slosh)
-            theta_slosh = effect_thetas[term]
-            base_extra = np.zeros_like(twist) if extra is None else extra
+        if self.slosh is None:
+            twist = self.momentum_model.predict_twist(base10, payload10, extra, span)
+        else:
+            theta_slosh = effect_thetas[self.slosh]
             # the slosh is driven by the motion of the rest of the robot (the slosh mass not attached)
             rest10 = base10 - _point_mass10(theta_slosh[:, 0], tank_m)
             rest_twist = self.momentum_model.predict_twist(rest10, payload10, extra, span)
             composite = self.momentum_model.mean_composite10(base10, payload10)
-            relative, moved = term.momentum(rest_twist, theta_slosh, tank_m, composite, self.context)
-            twist = self.momentum_model.predict_twist(base10, payload10, base_extra - relative, span, moved)
-        omega = np.ascontiguousarray(twist[..., 3:])
-        if true_rate:
-            return omega[:, samples] if self.needs_whole_log else omega
-        for term in self.by_stage.get("measurement", []):
-            omega = term.measure(omega, effect_thetas[term], self.context)  # type: ignore[attr-defined]
-        return omega[:, samples] if self.needs_whole_log else omega
+            relative, moved = self.slosh.momentum(rest_twist, theta_slosh, tank_m, composite, self.context)
+            carried = -relative if extra is None else extra - relative
+            twist = self.momentum_model.predict_twist(base10, payload10, carried, span, moved)
+        true_rate = np.ascontiguousarray(twist[..., 3:])
+        measured = true_rate
+        for term in self.measurement_terms:
+            measured = term.measure(measured, effect_thetas[term], self.context)  # type: ignore[attr-defined]
+        if self.needs_whole_log:
+            return true_rate[:, samples], measured[:, samples]
+        return true_rate, measured

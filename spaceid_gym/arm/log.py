@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from spaceid_gym.errors import SpaceIdInputError
-from spaceid_gym.log import _atomic_open, _read_csv_rows
+from spaceid_gym.log import JointTimeSeries, _read_csv_rows, atomic_open
 
 FloatArray = NDArray[np.float64]
 PathLike = str | os.PathLike[str]
@@ -35,7 +35,7 @@ _FIELDS = ("t_s", "q_rad", "dq_rad_s", "ddq_rad_s2", "effort")
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class ArmLog:
+class ArmLog(JointTimeSeries):
     """T samples of an n-joint fixed-base arm.
 
     The constructor copies the arrays to read-only float64 arrays and validates them.
@@ -59,43 +59,8 @@ class ArmLog:
     name: str = ""
 
     def __post_init__(self) -> None:
-        for field in _FIELDS:
-            value = getattr(self, field)
-            if value is None and field == "ddq_rad_s2":
-                continue
-            try:
-                array = np.array(value, dtype=np.float64)
-            except (TypeError, ValueError) as exc:
-                raise SpaceIdInputError(f"{self._source()}: {field} must be an array of numbers ({exc})") from exc
-            array.flags.writeable = False
-            object.__setattr__(self, field, array)
+        self._freeze_arrays(_FIELDS, ("ddq_rad_s2",), self._source())
         self.validate()
-
-    # ------------------------------------------------------------------ properties
-    @property
-    def n_joints(self) -> int:
-        """Number of joints n."""
-        return int(self.q_rad.shape[1])
-
-    @property
-    def n_samples(self) -> int:
-        """Number of samples T."""
-        return int(self.t_s.shape[0])
-
-    @property
-    def duration_s(self) -> float:
-        """``t[-1] - t[0]``, s."""
-        return float(self.t_s[-1] - self.t_s[0])
-
-    @property
-    def sample_period_s(self) -> float:
-        """Median time step, s (needs T >= 2)."""
-        if self.n_samples < 2:
-            raise SpaceIdInputError(f"{self._source()}: the sample period needs at least 2 samples")
-        return float(np.median(np.diff(self.t_s)))
-
-    def __len__(self) -> int:
-        return self.n_samples
 
     def __repr__(self) -> str:
         return (
@@ -175,7 +140,7 @@ class ArmLog:
     def to_csv(self, path: PathLike) -> Path:
         """Write the log as CSV (header in the module docstring), bit exact and atomically; returns the path."""
         path = Path(path)
-        with _atomic_open(path) as f:
+        with atomic_open(path) as f:
             f.write(",".join(self.column_names()) + "\n")
             for values in self.table().tolist():
                 f.write(",".join(map(repr, values)) + "\n")

@@ -26,6 +26,7 @@ import pinocchio as pin
 from numpy.typing import NDArray
 
 from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.robots.robot import build_pinocchio_model, parse_urdf_root
 
 FloatArray = NDArray[np.float64]
 
@@ -162,17 +163,9 @@ def arm_from_urdf_text(
     gravity_m_s2: tuple[float, float, float] | NDArray[np.float64] = GRAVITY_M_S2,
 ) -> ArmRobot:
     """Build an :class:`ArmRobot` from URDF text; ``source`` names it in error messages (see :func:`load_arm`)."""
-    try:
-        root = ET.fromstring(text)
-    except ET.ParseError as exc:
-        raise SpaceIdInputError(f"{source}: not valid URDF XML ({exc})") from None
-    if root.tag != "robot":
-        raise SpaceIdInputError(f"{source}: the root element is <{root.tag}>, expected <robot>")
+    root = parse_urdf_root(text, source)
     _check_joints(root, source)
-    try:
-        model = pin.buildModelFromXML(text)
-    except (ValueError, RuntimeError) as exc:
-        raise SpaceIdInputError(f"{source}: the URDF parser rejected it ({exc})") from None
+    model = build_pinocchio_model(text, source)
     n = model.njoints - 1
     if n < 1:
         raise SpaceIdInputError(f"{source}: no revolute joint found; expected a serial arm with at least one")

@@ -117,19 +117,30 @@ def load_robot(spec: str | Path) -> Robot:
     return robot_from_urdf_text(text, source)
 
 
-def robot_from_urdf_text(text: str, source: str = "<string>") -> Robot:
-    """Build a :class:`Robot` from URDF text; ``source`` names it in error messages."""
+def parse_urdf_root(text: str, source: str) -> ET.Element:
+    """The ``<robot>`` element of URDF text; a clear error naming ``source`` if it is not URDF XML."""
     try:
         root = ET.fromstring(text)
     except ET.ParseError as exc:
         raise SpaceIdInputError(f"{source}: not valid URDF XML ({exc})") from None
     if root.tag != "robot":
         raise SpaceIdInputError(f"{source}: the root element is <{root.tag}>, expected <robot>")
-    _check_links_and_joints(root, source)
+    return root
+
+
+def build_pinocchio_model(text: str, source: str, root_joint: pin.JointModel | None = None) -> pin.Model:
+    """pinocchio's model of URDF text (with ``root_joint`` if given); the parser's refusal becomes a clear error."""
     try:
-        model = pin.buildModelFromXML(text, pin.JointModelFreeFlyer())
-    except ValueError as exc:
+        return pin.buildModelFromXML(text) if root_joint is None else pin.buildModelFromXML(text, root_joint)
+    except (ValueError, RuntimeError) as exc:
         raise SpaceIdInputError(f"{source}: the URDF parser rejected it ({exc})") from None
+
+
+def robot_from_urdf_text(text: str, source: str = "<string>") -> Robot:
+    """Build a :class:`Robot` from URDF text; ``source`` names it in error messages."""
+    root = parse_urdf_root(text, source)
+    _check_links_and_joints(root, source)
+    model = build_pinocchio_model(text, source, pin.JointModelFreeFlyer())
     model.gravity = pin.Motion.Zero()  # orbital free fall: no gravity in the orbiting frame
     if model.njoints < 3:
         raise SpaceIdInputError(f"{source}: no movable joint found; expected an arm with at least one revolute joint")
