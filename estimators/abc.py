@@ -90,6 +90,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.optimize import least_squares
 
 from estimators.base import Estimator, SearchResult
 from estimators.linear_problem import LinearIdentificationProblem
@@ -148,6 +149,41 @@ def search_space(problem: Any, consistent: bool) -> SearchSpace:
     return SearchSpace(lower, upper, to_theta, consistency.full_from_search)
 
 
+def _polished(problem: Any, space: SearchSpace, start: FloatArray) -> FloatArray:
+    """Search coordinates (D,) after a bounded local least-squares descent from ``start`` (D,) on the problem's root cost.
+
+    The Jacobian is ``A d theta / d x`` with ``A`` of :meth:`~estimators.linear_problem.LinearIdentificationProblem.root_form`
+    and ``d theta / d x`` by forward differences in one batched map (D + 1 points); at most ``POLISH_ITERATIONS`` steps.
+    """
+    if not isinstance(problem, LinearIdentificationProblem):
+        raise SpaceIdInputError(
+            "polish=True: needs a linear problem (LinearIdentificationProblem); use 'hybrid' for nonlinear ones"
+        )
+    matrix, _ = problem.root_form()
+
+    def jacobian(x: FloatArray) -> FloatArray:
+        step = 1e-7 * np.maximum(1.0, np.abs(x))
+        step = np.where(x + step > space.upper, -step, step)  # stay inside the box
+        theta = space.to_theta(np.vstack((x, x + np.diag(step))))
+        problem.n_model_samples += len(x) * problem.n_samples
+        return matrix @ ((theta[1:] - theta[0]) / step[:, None]).T
+
+    result = least_squares(
+        lambda x: problem.root_cost(space.to_theta(x[None])[0]),
+        np.clip(start, space.lower, space.upper),
+        jac=jacobian,
+        bounds=(space.lower, space.upper),
+        x_scale="jac",
+        method="trf",
+        max_nfev=POLISH_ITERATIONS,
+    )
+    return np.asarray(result.x, dtype=float)
+
+
+#: the most least-squares steps of ``polish``
+POLISH_ITERATIONS = 100
+
+
 @dataclass
 class Colony:
     """The food sources of a colony and their bookkeeping.
@@ -178,6 +214,10 @@ class ArtificialBeeColony(Estimator):
             colony needs to reach the WLS error on the 50-parameter arm problem); replaced by ``max_evaluations``.
         max_evaluations: budget in whole-objective evaluations (>= SN, the initial colony).
         consistent: search the problem's physically consistent log-Cholesky coordinates (default False).
+        polish: after the colony, a local least-squares descent from the best source in the same coordinates and box
+            (linear problems only; ``scipy.optimize.least_squares``, trust region reflective, on the problem's
+            :meth:`~estimators.linear_problem.LinearIdentificationProblem.root_cost`), its evaluations counted in the
+            budget's total but not limited by it (default False).
         seed: the generator's seed.
     """
 
@@ -191,9 +231,11 @@ class ArtificialBeeColony(Estimator):
         max_cycles: int = 5000,
         max_evaluations: float | None = None,
         consistent: bool = False,
+        polish: bool = False,
         seed: int | None = 0,
     ) -> None:
         super().__init__(seed=seed)
+        self.polish = check_bool("polish", polish)
         self.colony_size = check_int("colony_size", colony_size, 4)
         if self.colony_size % 2:
             raise SpaceIdInputError(f"colony_size: expected an even number (half employed, half onlookers), got {colony_size}")
@@ -263,9 +305,14 @@ class ArtificialBeeColony(Estimator):
             history.append(float(colony.cost.min()))
         best = int(np.argmin(colony.cost))
         extra: dict[str, Any] = {"n_cycles_run": cycle, "n_scouts": n_scouts, "final_cost_spread": float(np.ptp(colony.cost))}
+        x_best = space.point(colony.unit[best])
+        if self.polish:
+            x_best = _polished(problem, space, x_best)
+            extra["colony_cost"] = history[-1] if history else float(colony.cost[best])
+            history.append(float(problem.cost(space.to_theta(x_best[None]), count=False)[0]))
         if space.to_full is not None:
-            extra["full_params"] = space.to_full(space.point(colony.unit[best][None]))[0].tolist()
-        return SearchResult(theta=space.theta(colony.unit[best])[0], cost_history=history, extra=extra)
+            extra["full_params"] = space.to_full(x_best[None])[0].tolist()
+        return SearchResult(theta=space.to_theta(x_best[None])[0], cost_history=history, extra=extra)
 
     @staticmethod
     def _greedy(problem: Any, space: SearchSpace, colony: Colony, sources: IntArray, candidates: FloatArray) -> None:
@@ -297,7 +344,7 @@ class ImprovedABC(ArtificialBeeColony):
             (default True, 0.3).
         scaled_fitness: onlookers' scale-free fitness (default True).
         gbest_guided: Zhu and Kwong's pull towards the best source (default False); ``gbest_weight``: its ``C`` (1.5).
-        colony_size, limit, max_cycles, max_evaluations, consistent, seed: as :class:`ArtificialBeeColony`.
+        colony_size, limit, max_cycles, max_evaluations, consistent, polish, seed: as :class:`ArtificialBeeColony`.
     """
 
     name = "improved-abc"
@@ -317,6 +364,7 @@ class ImprovedABC(ArtificialBeeColony):
         max_cycles: int = 5000,
         max_evaluations: float | None = None,
         consistent: bool = False,
+        polish: bool = False,
         seed: int | None = 0,
     ) -> None:
         super().__init__(
@@ -325,6 +373,7 @@ class ImprovedABC(ArtificialBeeColony):
             max_cycles=max_cycles,
             max_evaluations=max_evaluations,
             consistent=consistent,
+            polish=polish,
             seed=seed,
         )
         self.adaptive_step = check_bool("adaptive_step", adaptive_step)

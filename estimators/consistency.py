@@ -36,7 +36,7 @@ any box therefore only ever visits physically consistent bodies, and the box is 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -146,8 +146,9 @@ class PhysicalConsistency:
     """Which columns of a full parameter vector are rigid bodies and friction, and the consistent search box.
 
     The full parameter vector ``x`` (n_full,) holds each link's params10 (module conventions) in the
-    columns ``link_columns[l]`` and non-negative friction coefficients in ``friction_columns``; every
-    column is exactly one of these. An identification problem posed in **base parameters** gives
+    columns ``link_columns[l]``, non-negative per-joint coefficients (friction, armature) in
+    ``friction_columns`` and unconstrained ones (a torque offset) in ``free_columns``; every column is
+    exactly one of these. An identification problem posed in **base parameters** gives
     ``base_map`` ``K`` (k, n_full) with ``theta = K x``; ``None`` means the problem's ``theta`` is ``x``.
 
     The consistent search moves ``s`` (n_full,): per link its log-Cholesky coordinates (in the link's
@@ -159,7 +160,8 @@ class PhysicalConsistency:
     * ``s12, s23, s13`` in ``[-size, size]``; ``d`` in ``[log(min_length_fraction * size), log(size)]``;
     * friction in ``[0, friction_upper]``: the consistent set is already a box there, so the coefficient is
       searched directly (zero, a common truth for small joints, stays reachable; ``exp``/softplus would
-      exclude it).
+      exclude it);
+    * free columns in ``[-free_bound, free_bound]`` (no physical constraint).
 
     Attributes:
         link_columns: (L, 10) column indices of each link's params10 in ``x``.
@@ -168,6 +170,8 @@ class PhysicalConsistency:
         size_m: (L,) link size (m), see above.
         friction_upper: (F,) largest friction coefficient searched, > 0.
         base_map: (k, n_full) ``K`` or ``None``.
+        free_columns: (G,) column indices of unconstrained coefficients (default none).
+        free_bound: (G,) half-width of their search range, > 0.
         min_length_fraction: smallest CoM spread searched, as a fraction of ``size_m`` (default 1e-3).
     """
 
@@ -177,12 +181,18 @@ class PhysicalConsistency:
     size_m: FloatArray
     friction_upper: FloatArray
     base_map: FloatArray | None = None
+    free_columns: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.intp))
+    free_bound: FloatArray = field(default_factory=lambda: np.zeros(0))
     min_length_fraction: float = 1e-3
 
     def __post_init__(self) -> None:
         links = _index_array("link_columns", self.link_columns, (10,))
         friction = _index_array("friction_columns", self.friction_columns)
+        free = _index_array("free_columns", self.free_columns)
         n_links, n_friction = len(links), len(friction)
+        free_bound = np.asarray(self.free_bound, dtype=float).reshape(-1)
+        if free_bound.shape != (len(free),) or not np.all(np.isfinite(free_bound)) or np.any(free_bound <= 0.0):
+            raise SpaceIdInputError(f"free_bound: expected {len(free)} positive half-widths, got {self.free_bound!r}")
         mass = np.asarray(self.mass_range_kg, dtype=float).reshape(-1, 2) if n_links else np.zeros((0, 2))
         size = np.asarray(self.size_m, dtype=float).reshape(-1)
         upper = np.asarray(self.friction_upper, dtype=float).reshape(-1)
@@ -199,11 +209,11 @@ class PhysicalConsistency:
             raise SpaceIdInputError(f"friction_upper: expected {n_friction} positive coefficients, got {self.friction_upper!r}")
         if not 0.0 < self.min_length_fraction < 1.0:
             raise SpaceIdInputError(f"min_length_fraction: expected a number in (0, 1), got {self.min_length_fraction!r}")
-        columns = np.concatenate((links.ravel(), friction))
+        columns = np.concatenate((links.ravel(), friction, free))
         n_full = len(columns)
         if n_full == 0 or not np.array_equal(np.sort(columns), np.arange(n_full)):
             raise SpaceIdInputError(
-                f"link_columns and friction_columns: each column 0..{n_full - 1} of the full parameters must appear exactly once"
+                f"link_columns, friction_columns and free_columns: each column 0..{n_full - 1} of the full parameters must appear exactly once"
             )
         base_map = None
         if self.base_map is not None:
@@ -217,6 +227,8 @@ class PhysicalConsistency:
             ("size_m", size),
             ("friction_upper", upper),
             ("base_map", base_map),
+            ("free_columns", free),
+            ("free_bound", free_bound),
         ):
             object.__setattr__(self, attr, value)
 
@@ -257,7 +269,7 @@ class PhysicalConsistency:
     @property
     def n_full(self) -> int:
         """Columns of the full parameter vector (= dimension of the consistent search)."""
-        return 10 * self.n_links + len(self.friction_columns)
+        return 10 * self.n_links + len(self.friction_columns) + len(self.free_columns)
 
     @property
     def n_theta(self) -> int:
@@ -281,6 +293,7 @@ class PhysicalConsistency:
         lower, upper = np.empty(self.n_full), np.empty(self.n_full)
         lower[self.link_columns], upper[self.link_columns] = lower_links, upper_links
         lower[self.friction_columns], upper[self.friction_columns] = 0.0, self.friction_upper
+        lower[self.free_columns], upper[self.free_columns] = -self.free_bound, self.free_bound
         return lower, upper
 
     def full_from_search(self, search: ArrayLike) -> FloatArray:

@@ -95,6 +95,15 @@ def _matrix(name: str, value: ArrayLike, shape: tuple[int | None, ...], what: st
     return array
 
 
+def image_box(k_map: FloatArray, lower: FloatArray, upper: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The smallest box holding ``K x`` for every ``x`` in ``[lower, upper]``: (r,) x 2 (interval arithmetic).
+
+    The search box of base parameters ``beta = K p`` whose full parameters ``p`` lie in a box.
+    """
+    positive, negative = np.clip(k_map, 0.0, None), np.clip(k_map, None, 0.0)
+    return positive @ lower + negative @ upper, positive @ upper + negative @ lower
+
+
 class LinearIdentificationProblem:
     """The objective ``tau = Y theta`` on one data set; see the module docstring.
 
@@ -164,6 +173,7 @@ class LinearIdentificationProblem:
         self._gram = (weighted_y.T @ self.Y) / n_rows
         self._gradient0 = (weighted_y.T @ residual0) / n_rows
         self._cost0 = float(self.weights @ residual0**2) / n_rows
+        self._root: tuple[FloatArray, FloatArray] | None = None
 
     def with_row_std(self, row_std: ArrayLike) -> LinearIdentificationProblem:
         """The same data and parameters with the per-row noise std ``row_std`` (N,) (e.g. the per-joint std WLS
@@ -213,6 +223,25 @@ class LinearIdentificationProblem:
             return np.maximum(self._cost0 + 2.0 * delta @ self._gradient0 + quadratic, 0.0)
         error = self.predict(theta, samples, count) - self.tau[samples]
         return np.mean(self.weights[samples] * error * error, axis=1)
+
+    def root_form(self) -> tuple[FloatArray, FloatArray]:
+        """``(A, theta_ls)``: ``A`` (m, k), ``theta_ls`` (k,) with ``|A (theta - theta_ls)|^2 = cost(theta) - min cost`` for every
+        ``theta``: ``A = Lambda^(1/2) V^T`` from the eigen-decomposition ``V Lambda V^T`` of the (normalised) weighted Gram
+        matrix (the m eigenvalues above 1e-14 of the largest), ``theta_ls`` its least-squares minimiser (minimum-norm step
+        from the nominal when ``Y`` is rank deficient). A k-row least-squares form of the N-row cost for local polishing."""
+        if self._root is None:
+            eigenvalues, vectors = np.linalg.eigh(self._gram)
+            keep = eigenvalues > eigenvalues.max() * 1e-14
+            shift = -(vectors[:, keep] / eigenvalues[keep]) @ (vectors[:, keep].T @ self._gradient0)
+            self._root = (np.sqrt(eigenvalues[keep])[:, None] * vectors[:, keep].T, self.parameters.nominal + shift)
+        return self._root
+
+    def root_cost(self, theta: FloatArray, count: bool = True) -> FloatArray:
+        """``A (theta - theta_ls)`` (m,) of :meth:`root_form` for one ``theta`` (k,); counted as one evaluation."""
+        if count:
+            self.n_model_samples += self.n_samples
+        matrix, minimiser = self.root_form()
+        return matrix @ (np.asarray(theta, dtype=float) - minimiser)
 
     def residuals(self, theta: FloatArray, count: bool = True) -> FloatArray:
         """``Y theta - tau`` (N,) at one ``theta`` (k,), unweighted (N m)."""

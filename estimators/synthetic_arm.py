@@ -32,7 +32,7 @@ import scipy.linalg
 from numpy.typing import NDArray
 
 from estimators.consistency import PhysicalConsistency
-from estimators.linear_problem import LinearIdentificationProblem
+from estimators.linear_problem import LinearIdentificationProblem, image_box
 from estimators.parameters import PARAMS10_NAMES
 
 FloatArray = NDArray[np.float64]
@@ -138,12 +138,6 @@ def full_box() -> tuple[FloatArray, FloatArray]:
     lower = np.tile(np.concatenate((LINK_LOWER, [0.0, 0.0])), N_JOINTS)
     upper = np.tile(np.concatenate((LINK_UPPER, FRICTION_UPPER)), N_JOINTS)
     return lower, upper
-
-
-def image_box(k_map: FloatArray, lower: FloatArray, upper: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """The smallest box holding ``K x`` for every ``x`` in ``[lower, upper]``: (r,) x 2."""
-    positive, negative = np.clip(k_map, 0.0, None), np.clip(k_map, None, 0.0)
-    return positive @ lower + negative @ upper, positive @ upper + negative @ lower
 
 
 @dataclass

@@ -15,7 +15,13 @@ from pathlib import Path
 
 import numpy as np
 
-from spaceid_gym.arm.cli_commands import add_arm_simulate_arguments, run_arm_simulate
+from spaceid_gym.arm.cli_commands import (
+    ARM_COMMANDS,
+    add_arm_cross_validate_arguments,
+    add_arm_diagnose_arguments,
+    add_arm_identify_arguments,
+    add_arm_simulate_arguments,
+)
 from spaceid_gym.errors import SpaceIdInputError
 
 
@@ -126,9 +132,16 @@ def _parser() -> argparse.ArgumentParser:
     suite.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
     suite.add_argument("--out", type=Path, required=True, help="output folder")
 
-    arm = sub.add_parser("arm", help="fixed-base manipulators (UR5): simulate")
+    arm = sub.add_parser("arm", help="fixed-base manipulators (UR5): simulate, identify, cross-validate, diagnose")
     arm_sub = arm.add_subparsers(dest="arm_command", required=True)
     add_arm_simulate_arguments(arm_sub.add_parser("simulate", help="simulate an arm with friction and write a dataset folder"))
+    add_arm_identify_arguments(arm_sub.add_parser("identify", help="identify on some movements, validate on held-out ones"))
+    add_arm_cross_validate_arguments(
+        arm_sub.add_parser("cross-validate", help="leave-one-movement-out table of held-out errors per joint and estimator")
+    )
+    add_arm_diagnose_arguments(
+        arm_sub.add_parser("diagnose", help="find the missing joint term (friction, armature, offset) and where the model fails")
+    )
 
     demo = sub.add_parser("demo", help="the whole loop available so far on the built-in robot")
     demo.add_argument("--out", type=Path, default=Path("demo-output"), help="output folder (default demo-output)")
@@ -165,7 +178,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         elif args.command == "diagnose-suite":
             _diagnose_suite(args)
         elif args.command == "arm":
-            run_arm_simulate(args)
+            ARM_COMMANDS[args.arm_command](args)
         elif args.command == "demo":
             from spaceid_gym.demo import run_demo
 

@@ -157,6 +157,22 @@ def test_regressor_times_urdf_parameters_is_rnea(ur5, rng_states, friction) -> N
     assert np.abs(tau).max() > 10.0
 
 
+def test_armature_columns_match_pinocchio_armature(ur5, rng_states) -> None:
+    """Rotor inertias: ``Y p`` equals pinocchio's inverse dynamics of a model with ``armature`` set (independent code path)."""
+    regressor = ArmRegressor(ur5, friction=("coulomb",), armature=True)
+    assert regressor.parameter_names[-6:] == tuple(f"joint{j}_armature_kgm2" for j in range(1, 7))
+    p = regressor.nominal_parameters()
+    p[-6:] = [0.4, 0.35, 0.2, 0.05, 0.04, 0.03]
+    model = regressor.model_with_parameters(p)
+    np.testing.assert_array_equal(model.armature, p[-6:])
+    data = model.createData()
+    q, dq, ddq = rng_states
+    tau = np.array([pin.rnea(model, data, *state) for state in zip(q, dq, ddq, strict=True)])
+    np.testing.assert_allclose(regressor.torque(q, dq, ddq, p), tau, atol=1e-10, rtol=0)
+    assert np.abs(ddq @ np.diag(p[-6:])).max() > 0.1  # the armature term is not negligible in this check
+    np.testing.assert_array_equal(regressor.parameters_of_model(model)[-6:], p[-6:])
+
+
 def test_parameter_names_and_layout_match_a_random_model(ur5, rng_states) -> None:
     """Parameters written out by hand from random bodies (mass, CoM, inertia at the CoM) reproduce RNEA."""
     regressor = ArmRegressor(ur5, friction=("coulomb", "viscous"))

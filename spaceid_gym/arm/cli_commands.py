@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import time
 from pathlib import Path
+from typing import Any
 
 from spaceid_gym.arm.friction import FRICTION_TERMS
 from spaceid_gym.arm.simulator import INTERNAL_RATE_HZ, SAMPLE_RATE_HZ, ArmSensorModel
@@ -86,3 +87,256 @@ def run_arm_simulate(args: argparse.Namespace) -> None:
         f"friction {args.friction}, tracking error max {truth['tracking_error_max_rad']:.2e} rad, "
         f"max torque {100 * truth['max_torque_fraction']:.0f} % of the limit"
     )
+
+
+# ---------------------------------------------------------------------- identify, cross-validate, diagnose
+def _add_data_arguments(parser: argparse.ArgumentParser) -> None:
+    """Robot, data, model and signal-chain arguments shared by identify, cross-validate and diagnose."""
+    parser.add_argument("--robot", default="ur5", help="shipped arm name or URDF path (default ur5)")
+    parser.add_argument(
+        "--data", type=Path, required=True, help="folder of real UR5 movements, of simulated datasets, or one simulated dataset"
+    )
+    parser.add_argument(
+        "--friction",
+        default="coulomb,viscous",
+        help=f"friction terms of the model, comma-separated from {','.join(FRICTION_TERMS)}, or 'none' (default coulomb,viscous)",
+    )
+    parser.add_argument("--armature", action="store_true", help="add a rotor inertia per joint to the model")
+    parser.add_argument("--cutoff", type=float, default=4.0, help="zero-phase low-pass cutoff, Hz (default 4)")
+    parser.add_argument("--decimate", type=int, default=5, help="keep every k-th sample after filtering (default 5)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the estimators (default 0)")
+    parser.add_argument("--out", type=Path, required=True, help="output folder")
+
+
+def add_arm_identify_arguments(parser: argparse.ArgumentParser) -> None:
+    """The arguments of ``spaceid arm identify``."""
+    _add_data_arguments(parser)
+    parser.add_argument("--train", default=None, help="comma-separated training movements (default: all but --validate)")
+    parser.add_argument("--validate", default=None, help="comma-separated held-out movements (default none)")
+    parser.add_argument(
+        "--estimator",
+        default="wls",
+        help="estimator spec, e.g. wls, improved-abc[consistent=true,polish=true,max_evaluations=100000] (default wls)",
+    )
+
+
+def add_arm_cross_validate_arguments(parser: argparse.ArgumentParser) -> None:
+    """The arguments of ``spaceid arm cross-validate``."""
+    _add_data_arguments(parser)
+    parser.add_argument("--movements", default=None, help="comma-separated movements (default all)")
+    parser.add_argument(
+        "--estimators",
+        default="ols,wls,improved-abc[consistent=true,polish=true,max_evaluations=100000]",
+        help="comma-separated estimator specs (default ols, wls and the consistent improved ABC)",
+    )
+    parser.add_argument(
+        "--compare-without-friction", action="store_true", help="also fit the model without friction (the error friction removes)"
+    )
+
+
+def add_arm_diagnose_arguments(parser: argparse.ArgumentParser) -> None:
+    """The arguments of ``spaceid arm diagnose`` (its model default: no friction, the model to be diagnosed)."""
+    _add_data_arguments(parser)
+    parser.set_defaults(friction="none")
+    parser.add_argument("--movements", default=None, help="comma-separated movements (default all)")
+    parser.add_argument("--apply", action="store_true", help="add the named term, refit and report the error before and after")
+
+
+def _names(text: str | None) -> list[str] | None:
+    return None if text is None else [n.strip() for n in text.split(",") if n.strip()]
+
+
+def _movements(args: argparse.Namespace, names: list[str] | None) -> tuple[Any, dict[str, Any], dict[str, Any]]:
+    """The signal chain, the raw logs and their processed noise floors (simulated data) from the arguments."""
+    from estimators.arm_identification import Preparation, load_movements, processed_noise_floor, simulated_noise_std
+
+    if args.decimate < 1:
+        raise SpaceIdInputError(f"--decimate: expected an integer >= 1, got {args.decimate}")
+    preparation = Preparation(cutoff_hz=args.cutoff, decimate_factor=args.decimate)
+    raw = load_movements(args.data, names)
+    floors = {name: processed_noise_floor(preparation, simulated_noise_std(args.data, name), raw[name]) for name in raw}
+    return preparation, raw, floors
+
+
+def _model(args: argparse.Namespace, friction: tuple[str, ...] | None = None) -> Any:
+    from estimators.models.arm_model import ArmIdentificationModel
+    from spaceid_gym.arm.robot import load_arm
+
+    terms = parse_friction(args.friction) if friction is None else friction
+    return ArmIdentificationModel.build(load_arm(args.robot), terms, args.armature)
+
+
+def _error_line(error: Any) -> str:
+    ratio = error.noise_ratio
+    text = (
+        f"  {error.movement:<40} " + " ".join(f"{v:6.1f}" for v in error.relative_percent) + f" | {error.overall_percent:6.1f} %"
+    )
+    return text + ("" if ratio is None else " | x noise: " + " ".join(f"{v:.3f}" for v in ratio))
+
+
+def run_arm_identify(args: argparse.Namespace) -> None:
+    """``spaceid arm identify``: fit on the training movements, validate on the held-out ones, write the results.
+
+    Writes ``estimate.json`` (the base-parameter estimate), ``validation.json`` (per held-out movement the per-joint
+    relative error, its overall figure and, for simulated data, the error in noise units) and one overlay per held-out
+    movement (``overlay_<movement>.png``).
+    """
+    from estimators.arm_identification import fit, held_out_error
+    from estimators.diagnostics.plots import plot_overlay
+    from estimators.evaluation import estimator_from_spec
+    from spaceid_gym.log import write_json_atomic
+
+    validate = _names(args.validate) or []
+    train = _names(args.train)
+    overlap = set(validate) & set(train or [])
+    if overlap:
+        raise SpaceIdInputError(f"--train and --validate: movements {sorted(overlap)} are in both")
+    preparation, raw, floors = _movements(args, None if train is None else [*train, *validate])
+    missing = [n for n in validate if n not in raw]
+    if missing:
+        raise SpaceIdInputError(f"--validate: no movement {missing} in {args.data}; available: {', '.join(raw)}")
+    train = train or [n for n in raw if n not in validate]
+    if not train:
+        raise SpaceIdInputError("--train: no training movement left (every movement is in --validate)")
+    model = _model(args)
+    estimator = estimator_from_spec(args.estimator, seed=args.seed)
+    rows = preparation.all_rows(model, raw)
+    estimate = fit(model, {n: rows[n] for n in train}, estimator)
+    args.out.mkdir(parents=True, exist_ok=True)
+    estimate.extra.update(model=model.describe(), preparation=preparation.as_dict())
+    estimate.write_json(args.out / "estimate.json")
+    errors = [held_out_error(model, estimate.theta, rows[name], floors[name]) for name in validate]
+    write_json_atomic(
+        args.out / "validation.json",
+        {
+            "model": model.describe(),
+            "estimator": args.estimator,
+            "training_movements": train,
+            "held_out": [e.to_dict() for e in errors],
+        },
+    )
+    unit = "A" if any(raw[n].effort_kind == "current_A" for n in validate) else "N m"
+    for name, error in zip(validate, errors, strict=True):
+        log = rows[name].log
+        plot_overlay(
+            args.out / f"overlay_{name}.png",
+            log.t_s - log.t_s[0],
+            log.effort,
+            log.effort - error.residual,
+            channel_names=[f"joint {j + 1}" for j in range(model.n_joints)],
+            title=f"{name}: measured vs {args.estimator} ({model.describe()})",
+            units=unit,
+        )
+    consistent = estimate.physical.get("links_physically_consistent")
+    print(
+        f"{model.describe()}; {estimate.estimator} on {len(train)} movement(s) in {estimate.wall_time_s:.1f} s "
+        f"({estimate.n_evaluations:.0f} evaluations)"
+        + ("" if consistent is None else f"; physically consistent links: {sum(consistent)}/{len(consistent)}")
+    )
+    if errors:
+        print("held-out relative error per joint (%) | overall")
+        for error in errors:
+            print(_error_line(error))
+    print(f"wrote {args.out}/estimate.json, validation.json" + (", overlay_<movement>.png" if errors else ""))
+
+
+def run_arm_cross_validate(args: argparse.Namespace) -> None:
+    """``spaceid arm cross-validate``: leave one movement out, for each estimator (and without friction if asked);
+    writes ``table.md`` and ``rows.json`` and prints the per-model, per-estimator means."""
+    from estimators.arm_identification import cross_validation_markdown, leave_one_out, summary_table
+    from estimators.evaluation import estimator_from_spec, parse_estimator_specs
+    from spaceid_gym.log import write_json_atomic, write_text_atomic
+
+    preparation, logs, floors = _movements(args, _names(args.movements))
+    specs = parse_estimator_specs(args.estimators)
+    estimators = {spec: estimator_from_spec(spec, seed=args.seed) for spec in specs}
+    label = args.friction if parse_friction(args.friction) else "no friction"
+    models = {f"with {label}": _model(args)}
+    if args.compare_without_friction:
+        models["without friction"] = _model(args, ())
+    start = time.perf_counter()
+    rows = leave_one_out(models, logs, estimators, preparation, floors)
+    joint_names = [f"joint {j + 1}" for j in range(next(iter(models.values())).n_joints)]
+    args.out.mkdir(parents=True, exist_ok=True)
+    summary = summary_table(rows)
+    table = cross_validation_markdown(rows, joint_names)
+    write_text_atomic(args.out / "table.md", table)
+    write_json_atomic(
+        args.out / "rows.json",
+        {
+            "models": {k: m.describe() for k, m in models.items()},
+            "summary": summary,
+            "rows": [r.to_dict() for r in rows],
+            "wall_time_s": time.perf_counter() - start,
+        },
+    )
+    print(f"leave one movement out over {len(logs)} movements in {time.perf_counter() - start:.0f} s; mean held-out error (%):")
+    for entry in summary:
+        cells = " ".join(f"{v:6.1f}" for v in entry["mean_relative_percent"])
+        print(
+            f"  {entry['model']:<28} {entry['estimator']:<60} {cells} | {entry['mean_overall_percent']:6.1f} %"
+            f" | consistent: {entry['all_consistent']}"
+        )
+    print(f"wrote {args.out}/table.md, rows.json")
+
+
+def run_arm_diagnose(args: argparse.Namespace) -> None:
+    """``spaceid arm diagnose``: which joint term is missing (friction, armature, offset), where the model fails;
+    with ``--apply``, the error before and after adding it. Writes ``diagnosis.json``."""
+    from estimators.arm_identification import held_out_error
+    from estimators.diagnostics.arm_diagnose import diagnose_arm, extended_model, where_it_fails
+    from spaceid_gym.log import write_json_atomic
+
+    preparation, logs, floors = _movements(args, _names(args.movements))
+    model = _model(args)
+    diagnosis = diagnose_arm(model, logs, preparation)
+    print(f"model: {model.describe()}")
+    print(f"verdict: {diagnosis.verdict}" + (f" ({diagnosis.family})" if diagnosis.family else "") + f": {diagnosis.reason}")
+    print("candidates (best BIC first): " + "; ".join(f"{f.label} dBIC {f.delta_bic:.0f}" for f in diagnosis.candidates))
+    final = model
+    if args.apply and diagnosis.best() is not None:
+        final = extended_model(model, diagnosis.verdict) or model
+        before_rows, after_rows = preparation.all_rows(model, logs), preparation.all_rows(final, logs)
+        before = {n: held_out_error(model, diagnosis.baseline.theta, before_rows[n], floors[n]) for n in logs}
+        after_fit = diagnosis.best()
+        assert after_fit is not None
+        after = {n: held_out_error(final, after_fit.theta, after_rows[n], floors[n]) for n in logs}
+        diagnosis.extra["applied"] = {
+            "model": final.describe(),
+            "before": [e.to_dict() for e in before.values()],
+            "after": [e.to_dict() for e in after.values()],
+        }
+        print(
+            f"added {diagnosis.verdict}: fit error per joint (%) before -> after"
+            + (" (x noise floor)" if all(f is not None for f in floors.values()) else "")
+        )
+        for name in logs:
+            b, a = before[name], after[name]
+            line = f"  {name:<40} {b.overall_percent:6.1f} % -> {a.overall_percent:6.1f} %"
+            if a.overall_noise_ratio is not None and b.overall_noise_ratio is not None:
+                line += f" | {b.overall_noise_ratio:.2f} -> {a.overall_noise_ratio:.3f} x noise"
+            print(line)
+    if len(logs) >= 2:
+        failing = where_it_fails(final, logs, preparation)
+        diagnosis.extra["where_it_fails"] = failing.to_dict()
+        ranked = failing.ranked()
+        print(f"where it fails ({final.describe()}, held-out residual vs the movement's typical level, worst first):")
+        for name, segment in ranked[:8]:
+            t0 = logs[name].t_s[0]
+            print(
+                f"  {name:<40} t = {segment.t_start_s - t0:5.1f}-{segment.t_end_s - t0:5.1f} s: {segment.rms_over_noise:.2f} x typical"
+            )
+        if not ranked:
+            print("  no window stands out")
+    args.out.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(args.out / "diagnosis.json", diagnosis.to_dict())
+    print(f"wrote {args.out}/diagnosis.json")
+
+
+#: ``spaceid arm <command>`` -> its body
+ARM_COMMANDS: dict[str, Any] = {
+    "simulate": run_arm_simulate,
+    "identify": run_arm_identify,
+    "cross-validate": run_arm_cross_validate,
+    "diagnose": run_arm_diagnose,
+}

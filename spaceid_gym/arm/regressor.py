@@ -12,7 +12,10 @@ Parameters ``p`` (length ``10 n + k n``), in this order:
   (``mc = m c`` the first moment; ``I = I_C + m S(c)^T S(c)`` the inertia at the origin); this is
   the source document's ``[Ixx, Ixy, Ixz, Iyy, Iyz, Izz, m rx, m ry, m rz, m]`` reordered;
 * then the friction coefficients, joint-major (``joint1_coulomb_Nm, joint1_viscous_Nms,
-  joint2_coulomb_Nm, ...``), see :mod:`spaceid_gym.arm.friction`.
+  joint2_coulomb_Nm, ...``), see :mod:`spaceid_gym.arm.friction`;
+* then, with ``armature=True``, one rotor inertia per joint reflected through its gear,
+  ``jointj_armature_kgm2`` (``tau_j += I_a,j ddq_j``; pinocchio's ``model.armature``), which the
+  link parameters cannot express for the UR5's first joints.
 
 ``Y`` has shape (T, n, p): ``tau[t, j] = Y[t, j, :] @ p`` (N m). Stacking samples for least
 squares (:func:`stack`) is **sample-major**: row ``t n + j`` is joint j of sample t.
@@ -61,21 +64,30 @@ class ArmRegressor:
         robot: the arm.
         friction: a :class:`FrictionModel`, or the names of its terms (``("coulomb", "viscous")``,
             default), or ``None`` / ``()`` for rigid-body parameters only.
+        armature: add one rotor-inertia column per joint (kg m^2), after the friction (default False).
 
     Attributes:
         robot, friction: as given (``friction`` as a :class:`FrictionModel`).
         parameter_names: names of the p parameters (see the module docstring).
         n_inertial: 10 n, the number of rigid-body parameters (they come first).
+        armature: whether the last n parameters are rotor inertias.
     """
 
-    def __init__(self, robot: ArmRobot, friction: FrictionModel | Sequence[str] | None = ("coulomb", "viscous")) -> None:
+    def __init__(
+        self,
+        robot: ArmRobot,
+        friction: FrictionModel | Sequence[str] | None = ("coulomb", "viscous"),
+        armature: bool = False,
+    ) -> None:
         self.robot = robot
         self.friction = FrictionModel.coerce(friction)
+        self.armature = bool(armature)
         self._data = robot.create_data()
         n = robot.n_joints
         self.n_inertial = 10 * n
         inertial_names = [f"link{k + 1}_{field}" for k in range(n) for field in INERTIAL_FIELDS]
-        self.parameter_names: tuple[str, ...] = (*inertial_names, *self.friction.parameter_names(n))
+        armature_names = [f"joint{j + 1}_armature_kgm2" for j in range(n)] if self.armature else []
+        self.parameter_names: tuple[str, ...] = (*inertial_names, *self.friction.parameter_names(n), *armature_names)
 
     @property
     def n_joints(self) -> int:
@@ -100,10 +112,12 @@ class ArmRegressor:
         for t in range(n_samples):
             out[t, :, : self.n_inertial] = pin.computeJointTorqueRegressor(model, data, q[t], dq[t], ddq[t])
         k = self.friction.n_terms
+        joints = np.arange(n)
         if k:
-            friction_block = out[:, :, self.n_inertial :].reshape(n_samples, n, n, k)
-            joints = np.arange(n)
+            friction_block = out[:, :, self.n_inertial : self.n_inertial + n * k].reshape(n_samples, n, n, k)
             friction_block[:, joints, joints, :] = self.friction.features(dq)
+        if self.armature:
+            out[:, joints, self.n_inertial + n * k + joints] = ddq
         return out
 
     def torque(self, q_rad: FloatArray, dq_rad_s: FloatArray, ddq_rad_s2: FloatArray, parameters: FloatArray) -> FloatArray:
@@ -116,23 +130,27 @@ class ArmRegressor:
         return self.parameters_of_model(self.robot.model)
 
     def parameters_of_model(self, model: pin.Model) -> FloatArray:
-        """Inertial parameters of a pinocchio model with the robot's structure, friction zero, shape (p,)."""
+        """Inertial parameters of a pinocchio model with the robot's structure, friction zero, its armature, shape (p,)."""
         if model.njoints != self.n_joints + 1:
             raise SpaceIdInputError(f"parameters_of_model: model has {model.njoints - 1} joints, the robot {self.n_joints}")
         out = np.zeros(self.n_parameters)
         out[: self.n_inertial] = np.concatenate([model.inertias[k].toDynamicParameters() for k in range(1, model.njoints)])
+        if self.armature:
+            out[-self.n_joints :] = model.armature
         return out
 
     def model_with_parameters(self, parameters: FloatArray) -> pin.Model:
         """A copy of the robot's pinocchio model whose bodies have the given inertial parameters.
 
-        Friction coefficients in ``parameters`` are ignored (pinocchio models no friction). The
-        parameters need not be physically consistent (pinocchio stores them as given).
+        Friction coefficients in ``parameters`` are ignored (pinocchio models no friction); armature goes
+        to ``model.armature``. The parameters need not be physically consistent (pinocchio stores them as given).
         """
         p = self._parameters(parameters)
         model = pin.Model(self.robot.model)
         for k in range(1, model.njoints):
             model.inertias[k] = pin.Inertia.FromDynamicParameters(p[10 * (k - 1) : 10 * k].copy())
+        if self.armature:
+            model.armature = p[-self.n_joints :].copy()
         return model
 
     def _parameters(self, parameters: FloatArray) -> FloatArray:

@@ -1,0 +1,367 @@
+"""Which joint effect is the arm model missing, and where does it fail? The fixed-base counterpart of :mod:`.diagnose`.
+
+:func:`diagnose_arm` fits the model as it is and, for each candidate joint term not in it, the model with that term
+added (every fit by least squares on the same prepared training movements, rows weighted by fixed per-joint noise
+levels), and ranks them:
+
+* candidates (:data:`CANDIDATES`): ``friction`` (Coulomb + viscous, the source's model), ``coulomb``, ``viscous``,
+  ``stribeck``, ``offset`` (a constant torque or current bias) and ``armature`` (rotor inertia);
+* weights: each joint's noise std ``s_j`` from the fit with every candidate term at once (the best-fitting model, as
+  the free-floating diagnosis takes the smallest residual std); ``chi2 = sum_rows (r / s_j)^2 / kappa`` with
+  ``kappa`` the movement's :meth:`~estimators.arm_identification.Preparation.correlation_factor`: the prepared
+  rows are low-pass filtered, so ``kappa`` (about 3.5) of them carry one independent sample's information about the
+  slowly varying columns; the sample count ``N`` of the excess and the BIC is ``sum N_m / kappa_m`` likewise;
+* scores: likelihood ratio ``chi2_baseline - chi2_candidate`` against chi-square with as many degrees of freedom as
+  base parameters added (Bonferroni over the candidates: significant below ``alpha / m``), BIC ``chi2 + k ln N``, and
+  the fraction of the baseline's excess over the noise (``chi2_baseline - (N - k)``) the candidate explains;
+* evidence in the residual: per joint, the correlation of the baseline residual with ``sign(dq_j)`` and ``dq_j`` (the
+  signatures of Coulomb and viscous friction), with a two-sided test;
+* verdict: the significant candidate with the lowest BIC if it explains at least
+  :data:`~estimators.diagnostics.diagnose.EXPLAINED_FRACTION` of the excess; ``"none"`` when no candidate is
+  significant; ``"unexplained"`` otherwise. ``family`` says ``"friction"`` for the four friction terms.
+
+:func:`where_it_fails` finds the time windows of each movement whose held-out residual (model fitted on the other
+movements) is far above the model's typical error, with
+:func:`~estimators.diagnostics.residuals.failing_segments`; on the real UR5 logs these are the periods a person
+pushed the arm (``WDist``, ``w_disturbance``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import stats
+
+from estimators.arm_identification import Preparation, fit, raw_period
+from estimators.diagnostics.diagnose import EXPLAINED_FRACTION, NO_MISSING_EFFECT, UNEXPLAINED
+from estimators.diagnostics.residuals import Segment, failing_segments
+from estimators.linear_ls import weighted_lstsq
+from estimators.models.arm_model import ArmIdentificationModel, IdentificationRows
+from estimators.registry import make_estimator
+from spaceid_gym.arm.friction import FRICTION_TERMS
+from spaceid_gym.arm.log import ArmLog
+from spaceid_gym.errors import SpaceIdInputError
+
+FloatArray = NDArray[np.float64]
+
+#: candidate label -> (friction terms added, armature added)
+CANDIDATES: dict[str, tuple[tuple[str, ...], bool]] = {
+    "friction": (("coulomb", "viscous"), False),
+    "coulomb": (("coulomb",), False),
+    "viscous": (("viscous",), False),
+    "stribeck": (("stribeck",), False),
+    "offset": (("offset",), False),
+    "armature": ((), True),
+}
+#: candidates that are friction
+FRICTION_FAMILY = ("friction", "coulomb", "viscous", "stribeck")
+
+
+def extended_model(model: ArmIdentificationModel, candidate: str) -> ArmIdentificationModel | None:
+    """``model`` with the candidate's terms added (same robot and torque constants), or ``None`` if it has them all."""
+    if candidate not in CANDIDATES:
+        raise SpaceIdInputError(f"candidate: unknown {candidate!r}; expected one of {', '.join(CANDIDATES)}")
+    terms, armature = CANDIDATES[candidate]
+    present = set(model.regressor.friction.terms)
+    if set(terms) <= present and (not armature or model.regressor.armature):
+        return None
+    friction = tuple(t for t in FRICTION_TERMS if t in present | set(terms))
+    return ArmIdentificationModel.build(model.robot, friction, model.regressor.armature or armature, model.torque_constants_Nm_A)
+
+
+@dataclass
+class ArmModelFit:
+    """One weighted least-squares fit of a model on the training movements, and its scores (module docstring).
+
+    ``n_rows`` is the effective number of independent rows, ``sum N_m / kappa_m``; ``residual_rms`` (n,) per joint.
+    """
+
+    label: str
+    model: ArmIdentificationModel
+    theta: FloatArray
+    chi2: float
+    n_rows: float
+    residual_rms: FloatArray
+    bic: float = math.nan
+    delta_bic: float = math.nan
+    lr_statistic: float = math.nan
+    p_value: float = math.nan
+    significant: bool = False
+    explained_fraction: float = math.nan
+
+    @property
+    def n_params(self) -> int:
+        """Base parameters of the model."""
+        return self.model.n_params
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready figures."""
+        return {
+            "candidate": self.label,
+            "model": self.model.describe(),
+            "n_params": self.n_params,
+            "chi2": self.chi2,
+            "bic": self.bic,
+            "delta_bic": self.delta_bic,
+            "lr_statistic": self.lr_statistic,
+            "p_value": self.p_value,
+            "significant": self.significant,
+            "explained_fraction": self.explained_fraction,
+            "residual_rms_per_joint": self.residual_rms.tolist(),
+        }
+
+
+@dataclass
+class ResidualCorrelation:
+    """Per joint (n,): correlation of the baseline residual with ``sign(dq_j)`` and ``dq_j``, and two-sided p-values."""
+
+    with_sign: FloatArray
+    with_rate: FloatArray
+    p_sign: FloatArray
+    p_rate: FloatArray
+
+    def describe(self, alpha: float) -> str:
+        """The joints whose residual correlates significantly (Bonferroni over 2 n tests)."""
+        level = alpha / (2 * len(self.with_sign))
+        parts = []
+        for j in range(len(self.with_sign)):
+            hits = [
+                f"{name} (r = {value:+.2f})"
+                for name, value, p in (
+                    (f"sign(dq{j + 1})", self.with_sign[j], self.p_sign[j]),
+                    (f"dq{j + 1}", self.with_rate[j], self.p_rate[j]),
+                )
+                if p < level
+            ]
+            if hits:
+                parts.append(f"joint {j + 1} with {' and '.join(hits)}")
+        return "; ".join(parts) if parts else "no joint's residual correlates with sign(dq) or dq"
+
+
+@dataclass
+class ArmDiagnosis:
+    """What :func:`diagnose_arm` found: verdict, reason, the fits (best BIC first) and the residual evidence."""
+
+    verdict: str
+    family: str | None
+    reason: str
+    baseline: ArmModelFit
+    candidates: list[ArmModelFit]
+    correlation: ResidualCorrelation
+    noise_std: FloatArray
+    alpha: float
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def best(self) -> ArmModelFit | None:
+        """The fit of the named candidate, if any."""
+        return next((f for f in self.candidates if f.label == self.verdict), None)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The ``arm diagnose --out`` JSON."""
+        c = self.correlation
+        return {
+            "verdict": self.verdict,
+            "family": self.family,
+            "reason": self.reason,
+            "alpha": self.alpha,
+            "baseline": self.baseline.to_dict(),
+            "candidates": [f.to_dict() for f in self.candidates],
+            "noise_std_per_joint": self.noise_std.tolist(),
+            "residual_correlation": {
+                "with_sign_dq": c.with_sign.tolist(),
+                "with_dq": c.with_rate.tolist(),
+                "p_sign_dq": c.p_sign.tolist(),
+                "p_dq": c.p_rate.tolist(),
+            },
+            **self.extra,
+        }
+
+
+def _weighted_fit(
+    label: str, model: ArmIdentificationModel, logs: Mapping[str, ArmLog], preparation: Preparation, std: FloatArray | None
+) -> ArmModelFit:
+    """Least squares of ``model`` on the ``logs`` with per-joint std ``std`` (n,) (``None``: unweighted)."""
+    rows = preparation.all_rows(model, logs)
+    problem = model.problem(rows)
+    row_std = None if std is None else std[problem.row_group]
+    theta, _ = weighted_lstsq(problem, row_std)
+    residual = problem.residuals(theta, count=False)
+    kappa = np.concatenate(
+        [np.full(item.log.effort.size, preparation.correlation_factor(raw_period(logs[name]))) for name, item in rows.items()]
+    )
+    weights = (np.ones_like(residual) if row_std is None else 1.0 / row_std**2) / kappa
+    rms = np.sqrt(np.bincount(problem.row_group, residual**2) / np.bincount(problem.row_group))
+    return ArmModelFit(label, model, theta, float(weights @ residual**2), float(np.sum(1.0 / kappa)), rms)
+
+
+def _correlation(model: ArmIdentificationModel, theta: FloatArray, rows: Mapping[str, IdentificationRows]) -> ResidualCorrelation:
+    residual = np.concatenate([item.log.effort - model.predict(theta, item) for item in rows.values()])
+    dq = np.concatenate([item.log.dq_rad_s for item in rows.values()])
+    n = len(residual)
+
+    def corr(a: FloatArray, b: FloatArray) -> tuple[float, float]:
+        if np.std(a) == 0.0 or np.std(b) == 0.0:
+            return 0.0, 1.0
+        r = float(np.corrcoef(a, b)[0, 1])
+        t = r * math.sqrt((n - 2) / max(1.0 - r * r, 1e-300))
+        return r, float(2.0 * stats.t.sf(abs(t), n - 2))
+
+    sign = [corr(residual[:, j], np.sign(dq[:, j])) for j in range(dq.shape[1])]
+    rate = [corr(residual[:, j], dq[:, j]) for j in range(dq.shape[1])]
+    return ResidualCorrelation(
+        np.array([s[0] for s in sign]),
+        np.array([r[0] for r in rate]),
+        np.array([s[1] for s in sign]),
+        np.array([r[1] for r in rate]),
+    )
+
+
+def diagnose_arm(
+    model: ArmIdentificationModel,
+    logs: Mapping[str, ArmLog],
+    preparation: Preparation | None = None,
+    candidates: tuple[str, ...] | list[str] | None = None,
+    alpha: float = 0.01,
+) -> ArmDiagnosis:
+    """Rank the candidate joint terms for ``model`` on the raw ``logs`` through ``preparation`` (default settings)
+    (module docstring)."""
+    preparation = preparation or Preparation()
+    if not 0.0 < alpha < 1.0:
+        raise SpaceIdInputError(f"alpha: expected a level in (0, 1), got {alpha!r}")
+    names = list(CANDIDATES) if candidates is None else list(candidates)
+    extended = {name: extended_model(model, name) for name in names}
+    extended = {name: m for name, m in extended.items() if m is not None}
+    everything = model
+    for name in extended:
+        everything = extended_model(everything, name) or everything
+    noise_std = _weighted_fit("all", everything, logs, preparation, None).residual_rms
+    baseline = _weighted_fit("baseline", model, logs, preparation, noise_std)
+    fits = [_weighted_fit(name, m, logs, preparation, noise_std) for name, m in extended.items()]
+    n = baseline.n_rows
+    baseline.bic = baseline.chi2 + baseline.n_params * math.log(n)
+    excess = baseline.chi2 - (n - baseline.n_params)
+    for f in fits:
+        k = f.n_params - baseline.n_params
+        f.bic = f.chi2 + f.n_params * math.log(n)
+        f.delta_bic = f.bic - baseline.bic
+        f.lr_statistic = baseline.chi2 - f.chi2
+        f.p_value = float(stats.chi2.sf(max(f.lr_statistic, 0.0), max(k, 1)))
+        f.significant = f.p_value < alpha / max(len(fits), 1)
+        f.explained_fraction = f.lr_statistic / excess if excess > 0 else 0.0
+    fits.sort(key=lambda f: f.bic)
+    correlation = _correlation(model, baseline.theta, preparation.all_rows(model, logs))
+    significant = [f for f in fits if f.significant]
+    if not significant:
+        verdict, reason = NO_MISSING_EFFECT, "no candidate term is significant"
+    else:
+        best = significant[0]
+        if best.explained_fraction >= EXPLAINED_FRACTION:
+            verdict = best.label
+            reason = (
+                f"adding {best.label} lowers the BIC by {-best.delta_bic:.0f} (likelihood ratio {best.lr_statistic:.0f}, "
+                f"p = {best.p_value:.2g}) and explains {100 * best.explained_fraction:.0f} % of the excess over the noise; "
+                f"residual: {correlation.describe(alpha)}"
+            )
+        else:
+            verdict = UNEXPLAINED
+            reason = (
+                f"the best significant candidate ({best.label}) explains only {100 * best.explained_fraction:.0f} % of the "
+                f"excess over the noise; residual: {correlation.describe(alpha)}"
+            )
+    family = "friction" if verdict in FRICTION_FAMILY else (None if verdict in (NO_MISSING_EFFECT, UNEXPLAINED) else verdict)
+    return ArmDiagnosis(verdict, family, reason, baseline, fits, correlation, noise_std, alpha)
+
+
+# ---------------------------------------------------------------------- where it fails
+@dataclass
+class FailingPeriods:
+    """Per movement, the windows whose held-out residual is far above the model's typical error.
+
+    Attributes:
+        segments: movement -> ranked :class:`~estimators.diagnostics.residuals.Segment` list.
+        reference_std: movement -> (n,) its typical error level per joint (the square root of the median over its
+            windows of the window's mean square held-out residual), the "noise" of the tests.
+        window_s: window length, s.
+    """
+
+    segments: dict[str, list[Segment]]
+    reference_std: dict[str, FloatArray]
+    window_s: float
+
+    def ranked(self) -> list[tuple[str, Segment]]:
+        """Every flagged window over all movements, worst (largest RMS over the reference) first."""
+        pairs = [(name, s) for name, segments in self.segments.items() for s in segments]
+        return sorted(pairs, key=lambda pair: -pair[1].rms_over_noise)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready."""
+        return {
+            "typical_level_per_joint": {name: level.tolist() for name, level in self.reference_std.items()},
+            "window_s": self.window_s,
+            "segments": {
+                name: [
+                    {
+                        "t_start_s": s.t_start_s,
+                        "t_end_s": s.t_end_s,
+                        "rms_over_typical": s.rms_over_noise,
+                        "joint_rms_over_typical": s.channel_rms_over_noise.tolist(),
+                        "p_value_holm": s.p_value,
+                        "moving_joints": s.moving_joints,
+                    }
+                    for s in segments
+                ]
+                for name, segments in self.segments.items()
+            },
+        }
+
+
+def where_it_fails(
+    model: ArmIdentificationModel,
+    logs: Mapping[str, ArmLog],
+    preparation: Preparation | None = None,
+    estimator: str = "wls",
+    window_s: float = 2.0,
+    confidence: float = 0.999,
+) -> FailingPeriods:
+    """Held-out residual of every movement (``model`` fitted by ``estimator`` on the others), tested window by window
+    against the movement's typical error level (:class:`FailingPeriods`): a window is flagged when its mean square
+    exceeds that level at ``confidence`` (Holm-corrected F test with the level's degrees of freedom taken as one per
+    window and joint). Model error that is the same all along a movement is not flagged; an outburst (a push on the
+    arm, a collision, a payload picked up) is."""
+    if len(logs) < 2:
+        raise SpaceIdInputError(f"where it fails: needs at least two movements (held-out residuals), got {list(logs)}")
+    rows = (preparation or Preparation()).all_rows(model, logs)
+    residuals = {}
+    for held, item in rows.items():
+        estimate = fit(model, {n: r for n, r in rows.items() if n != held}, make_estimator(estimator))
+        residuals[held] = item.log.effort - model.predict(estimate.theta, item)
+    logs = {name: item.log for name, item in rows.items()}
+    reference = {name: _typical_level(logs[name].t_s, residual, window_s) for name, residual in residuals.items()}
+    segments = {
+        name: failing_segments(
+            logs[name].t_s,
+            residual,
+            reference[name],
+            logs[name].q_rad,
+            logs[name].dq_rad_s,
+            window_s=window_s,
+            confidence=confidence,
+            noise_dof=float(residual.shape[1] * (np.ptp(logs[name].t_s) // window_s + 1)),
+        )
+        for name, residual in residuals.items()
+    }
+    return FailingPeriods(segments, reference, window_s)
+
+
+def _typical_level(t_s: FloatArray, residual: FloatArray, window_s: float) -> FloatArray:
+    """Per joint (n,): the square root of the median over ``window_s`` windows of the window's mean square residual,
+    the movement's typical error level (a few outbursts do not move a median)."""
+    window = np.floor((t_s - t_s[0]) / window_s).astype(int)
+    counts = np.bincount(window)
+    mean_square = np.stack([np.bincount(window, residual[:, j] ** 2) for j in range(residual.shape[1])], axis=1)
+    return np.sqrt(np.median(mean_square[counts > 0] / counts[counts > 0, None], axis=0))
