@@ -320,10 +320,7 @@ def cross_validation_markdown(rows: Sequence[CrossValidationRow], joint_names: S
         f"|---|---|---|{'---:|' * len(joint_names)}---:|---|\n"
     )
     lines = []
-    groups: dict[tuple[str, str], list[CrossValidationRow]] = {}
-    for row in rows:
-        groups.setdefault((row.model, row.estimator), []).append(row)
-    for (model, estimator), members in groups.items():
+    for (model, estimator), members in _grouped(rows).items():
         for row in members:
             cells = " | ".join(f"{v:.1f}" for v in row.error.relative_percent)
             lines.append(
@@ -340,15 +337,20 @@ def cross_validation_markdown(rows: Sequence[CrossValidationRow], joint_names: S
     return header + "\n".join(lines) + "\n"
 
 
+def _grouped(rows: Sequence[CrossValidationRow]) -> dict[tuple[str, str], list[CrossValidationRow]]:
+    """The rows by (model, estimator), in order of first appearance."""
+    groups: dict[tuple[str, str], list[CrossValidationRow]] = {}
+    for row in rows:
+        groups.setdefault((row.model, row.estimator), []).append(row)
+    return groups
+
+
 def _yes_no(value: bool | None) -> str:
     return "n/a" if value is None else ("yes" if value else "**no**")
 
 
 def summary_table(rows: Sequence[CrossValidationRow]) -> list[dict[str, Any]]:
     """Per model and estimator: mean per-joint and overall relative error (%) over the held-out movements."""
-    groups: dict[tuple[str, str], list[CrossValidationRow]] = {}
-    for row in rows:
-        groups.setdefault((row.model, row.estimator), []).append(row)
     return [
         {
             "model": model,
@@ -359,5 +361,5 @@ def summary_table(rows: Sequence[CrossValidationRow]) -> list[dict[str, Any]]:
             "n_movements": len(members),
             "mean_wall_time_s": float(np.mean([r.wall_time_s for r in members])),
         }
-        for (model, estimator), members in groups.items()
+        for (model, estimator), members in _grouped(rows).items()
     ]
