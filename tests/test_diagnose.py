@@ -9,9 +9,9 @@ import pytest
 
 from agents.excitation import FourierExcitation
 from estimators.diagnostics.compare import compare, model_from_estimate
-from estimators.diagnostics.diagnose import NO_MISSING_EFFECT, UNEXPLAINED, diagnose
+from estimators.diagnostics.diagnose import NO_MISSING_EFFECT, UNEXPLAINED, ModelFit, _verdict, diagnose, nested_p_value
 from estimators.diagnostics.suite import DIAGNOSTIC_EXCITATION
-from estimators.diagnostics.workflow import run_loop, write_report
+from estimators.diagnostics.workflow import parameter_errors, run_loop, write_report
 from estimators.problem import IdentificationModel
 from estimators.registry import make_estimator
 from spaceid_gym.datasets import simulate_episode
@@ -111,3 +111,62 @@ def test_compare_errors_name_the_problem(paper6: Robot, bias_log, tmp_path) -> N
         model_from_estimate(paper6, {"parameterisation": "fuel", "parameters": {"fuel_consumed_kg": 1.0}})
     with pytest.raises(SpaceIdInputError, match="expected 4 values"):
         compare(IdentificationModel(paper6, "fuel"), log, np.zeros(3))
+
+
+def _scored_fit(effect: str | None, n_params: int, chi2_value: float, n: int = 9174) -> ModelFit:
+    """A fit with its scores set as :func:`~estimators.diagnostics.diagnose._score` would (significant, plausible)."""
+    return ModelFit(
+        effects=(),
+        effect=effect,
+        theta=np.zeros(n_params),
+        names=tuple(f"x{i}" for i in range(n_params)),
+        rss=0.0,
+        n_residuals=n,
+        n_params=n_params,
+        attitude_chi2=None,
+        n_attitude_values=0,
+        physical={},
+        implausible=[],
+        wall_time_s=0.0,
+        chi2=chi2_value,
+        bic=chi2_value + n_params * np.log(n),
+        significant=effect is not None,
+        explained_fraction=1.0,
+    )
+
+
+@pytest.mark.parametrize(("nested_statistic", "expected"), [(12.93, "external_torque"), (9.0, "initial_momentum")])
+def test_nesting_test_is_corrected_for_the_containers_compared_only(nested_statistic: float, expected: str) -> None:
+    """The scores of the suite's ``external_torque`` log of seed 12 (``paper6``, 60 s): three candidates named,
+    ``initial_momentum`` the lowest BIC, ``external_torque`` 12.93 better in chi-square (p = 0.0048, 3 dof). One
+    nesting test is made, so it is judged at alpha = 0.01, not alpha / 3 (which named ``initial_momentum``);
+    a likelihood ratio of 9 (p = 0.03) keeps the nested model."""
+    baseline = _scored_fit(None, 4, 9300.0)
+    momentum = _scored_fit("initial_momentum", 7, 9240.0)
+    torque = _scored_fit("external_torque", 10, 9240.0 - nested_statistic)
+    bias = _scored_fit("gyro_bias", 7, 9255.0)
+    assert 0.01 / 3 < nested_p_value(momentum, _scored_fit("external_torque", 10, 9240.0 - 12.93)) < 0.01
+    verdict, reason = _verdict(baseline, [momentum, torque, bias], analysis=None, alpha=0.01)  # type: ignore[arg-type]
+    assert verdict == expected, reason
+    assert ("contains initial_momentum" in reason) == (expected == "external_torque")
+
+
+def test_parameter_errors_use_the_bound_at_the_truth(paper6: Robot, short_fuel_episode) -> None:
+    """An estimate 2.5 times high in mdf carries a tank bound too small (it scales as 1 / mdf): the z-scores divide by
+    the bound at the true parameters (payload off, as in the truth), and the estimate's own bound is kept beside it."""
+    ep = short_fuel_episode
+    truth = {"fuel_consumed_kg": float(ep.theta_true[0]), "tank_position_m": ep.theta_true[1:].tolist()}
+    model = IdentificationModel(paper6, "fuel", effects="payload")
+    problem = model.problem(ep.log)
+    off = problem.parameters.nominal.copy()
+    off[:4] = ep.theta_true * np.array([2.5, 1.0, 1.0, 1.0])
+    estimate = problem.make_estimate(off, estimator="test", options={}, seed=None, cost_history=[0.0], wall_time_s=0.0)
+    errors = parameter_errors(model, ep.log, estimate, truth)
+    assert errors is not None
+    at_truth = problem.crlb_std(np.concatenate((ep.theta_true, np.zeros(10))), estimate.noise_std_rad_s)[:4]
+    np.testing.assert_allclose(errors.crlb_std, at_truth, rtol=1e-9)
+    np.testing.assert_allclose(errors.crlb_std_at_estimate, estimate.theta_std[:4], rtol=1e-12)
+    assert np.all(errors.crlb_std_at_estimate[1:] < 0.7 * errors.crlb_std[1:])
+    np.testing.assert_allclose(errors.z, (off[:4] - ep.theta_true) / at_truth)
+    with pytest.raises(SpaceIdInputError, match="not the model's"):
+        parameter_errors(IdentificationModel(paper6, "fuel"), ep.log, estimate, truth)

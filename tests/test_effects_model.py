@@ -7,7 +7,7 @@ import pytest
 
 from agents.excitation import FourierExcitation
 from estimators.diagnostics.gyro_stellar import GyroStellarCheck
-from estimators.models.effects import EFFECT_TERMS, parse_effects
+from estimators.models.effects import EFFECT_TERMS, make_terms, parse_effects
 from estimators.problem import IdentificationModel
 from spaceid_gym.datasets import simulate_episode
 from spaceid_gym.effects import HiddenEffects, draw_effect
@@ -16,24 +16,6 @@ from spaceid_gym.robots import Robot
 from spaceid_gym.sim.sensors import SensorModel
 
 THETA = np.array([40.0, 0.2, -0.1, 0.1])  # mdf kg, tank m
-
-
-def _effect_vector(name: str, truth: dict) -> np.ndarray:
-    """The model's unknowns of effect ``name`` from the simulator's truth (shared conventions)."""
-    if name == "initial_momentum":
-        return np.asarray(truth["initial_momentum_Nms"])
-    if name == "gyro_bias":
-        return np.asarray(truth["gyro_bias_rad_s"])
-    if name == "gyro_scale":
-        return np.ravel(truth["gyro_scale_misalignment"])
-    if name == "payload":
-        return np.asarray(truth["payload_params10"])
-    if name == "delay":
-        return np.array([truth["delay_s"]])
-    if name == "slosh":
-        return np.array([truth["slosh_mass_kg"], truth["slosh_frequency_hz"], truth["slosh_damping_ratio"]])
-    zero = np.zeros(3)
-    return np.concatenate((zero, truth.get("external_torque_Nm", zero), truth.get("external_torque_rate_Nm_s", zero)))
 
 
 def _noise_free(robot: Robot, hidden: HiddenEffects, duration_s: float = 20.0, **excitation: float):
@@ -46,12 +28,13 @@ def _noise_free(robot: Robot, hidden: HiddenEffects, duration_s: float = 20.0, *
 
 @pytest.mark.parametrize("name", ["initial_momentum", "gyro_bias", "gyro_scale", "payload", "delay", "external_torque"])
 def test_model_reproduces_the_simulated_effect(paper6: Robot, name: str) -> None:
-    """At the true parameters the model reproduces a noise-free log with the effect hidden to 1e-8 rad/s (without it, it cannot)."""
+    """At the true parameters (the term's unknowns read from the truth by ``from_truth``) the model reproduces a
+    noise-free log with the effect hidden to 1e-8 rad/s (without it, it cannot)."""
     hidden = draw_effect(name, np.random.default_rng(5), paper6, THETA[0])
     log = _noise_free(paper6, hidden)
     spec = "external_torque[drift=true]" if name == "external_torque" else name
     problem = IdentificationModel(paper6, "fuel", effects=spec).problem(log)
-    with_effect = np.concatenate((THETA, _effect_vector(name, hidden.to_dict())))
+    with_effect = np.concatenate((THETA, problem.parameters.terms[-1].from_truth(hidden.to_dict())))
     assert np.abs(problem.residuals(with_effect)).max() < 1e-8
     without = problem.parameters.nominal.copy()
     without[:4] = THETA
@@ -132,6 +115,23 @@ def test_payload_effect_is_refused_on_the_payload_parameterisation(paper6: Robot
 def test_wrong_bound_count_with_effects_is_named(paper6: Robot) -> None:
     with pytest.raises(SpaceIdInputError, match="expected 5 bounds"):
         IdentificationModel(paper6, "fuel", effects="delay", lower=[0, -0.5, -0.5, -0.5])
+
+
+def test_from_truth_reads_each_field_into_place_and_leaves_absent_effects_off(paper6: Robot) -> None:
+    """Slosh and the drift torque from their truth fields; an effect the truth lacks is the nominal (off); a field of
+    the wrong size is named."""
+    hidden = {"slosh_mass_kg": 12.0, "slosh_frequency_hz": 0.4, "slosh_damping_ratio": 0.03, "external_torque_Nm": [1e-4, 0, 0]}
+    for term in make_terms("slosh,external_torque[drift=true],payload,gyro_scale", paper6):
+        theta = term.from_truth(hidden)
+        assert theta.shape == (term.n_params,)
+        if term.name == "slosh":
+            np.testing.assert_array_equal(theta, [12.0, 0.4, 0.03])
+        elif term.name == "external_torque":
+            np.testing.assert_array_equal(theta, [0, 0, 0, 1e-4, 0, 0, 0, 0, 0])  # no momentum, no drift in the truth
+        else:
+            np.testing.assert_array_equal(theta, term.nominal)
+    with pytest.raises(SpaceIdInputError, match="delay_s has 2 values"):
+        make_terms("delay", paper6)[0].from_truth({"delay_s": [0.01, 0.02]})
 
 
 def test_every_catalogue_term_has_a_documented_range(paper6: Robot) -> None:

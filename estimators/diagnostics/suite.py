@@ -8,7 +8,9 @@ and no method could see it), realistic gyro noise, a fuel state drawn as in the 
 the effect hidden in the truth at its default magnitude (random direction, :func:`spaceid_gym.effects.draw_effect`);
 run :func:`~estimators.diagnostics.diagnose.diagnose` on the paper's ``fuel`` model; when the verdict names
 an effect, add it and measure the residual RMS against the simulated gyro noise and the fuel unknowns'
-errors in Cramér-Rao standard deviations, before and after.
+errors in Cramér-Rao standard deviations, before and after (``z_*``: the bound at the true parameters, as in
+:mod:`estimators.evaluation`; ``z_*_at_estimate``: the estimate's own bound, see
+:func:`~estimators.diagnostics.workflow.parameter_errors`).
 
 ``spaceid diagnose-suite`` runs it and writes ``suite.csv`` (a row per log), ``summary.json`` and
 ``table.md`` (per effect: verdicts, correct %, residual and parameter errors after).
@@ -26,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from estimators.diagnostics.diagnose import NO_MISSING_EFFECT, diagnose
-from estimators.diagnostics.workflow import apply_effect, parameter_errors
+from estimators.diagnostics.workflow import ParameterErrors, apply_effect, parameter_errors
 from estimators.problem import IdentificationModel
 
 #: options of :class:`~agents.excitation.FourierExcitation` for the suite (see the module docstring)
@@ -79,21 +81,31 @@ def run_case(robot_name: str, effect: str, seed: int, duration_s: float = 60.0) 
         "runner_up": next((c.effect for c in diagnosis.candidates if c.effect != diagnosis.verdict), ""),
         "rms_over_noise_before": diagnosis.baseline.residual_rms_rad_s / noise,
     }
-    before = parameter_errors(diagnosis.baseline_estimate, truth) if diagnosis.baseline_estimate is not None else None
-    for name, z in zip(("mdf", "bx", "by", "bz"), before.z if before is not None else [math.nan] * 4, strict=True):
-        row[f"z_{name}_before"] = float(z)
-    after = None
+    before = None
+    if diagnosis.baseline_estimate is not None:
+        before = parameter_errors(model, log, diagnosis.baseline_estimate, truth)
+    row.update(_z_columns(before, "before"))
     if diagnosis.best is not None:
-        _, estimate = apply_effect(model, log, diagnosis.best.effect or "", diagnosis)
+        extended, estimate = apply_effect(model, log, diagnosis.best.effect or "", diagnosis)
         row["rms_over_noise_after"] = diagnosis.best.residual_rms_rad_s / noise
-        after = parameter_errors(estimate, truth)
+        after = parameter_errors(extended, log, estimate, truth)
     else:
         row["rms_over_noise_after"] = row["rms_over_noise_before"]
         after = before
-    for name, z in zip(("mdf", "bx", "by", "bz"), after.z if after is not None else [math.nan] * 4, strict=True):
-        row[f"z_{name}_after"] = float(z)
+    row.update(_z_columns(after, "after"))
     row["wall_time_s"] = time.perf_counter() - start
     return row
+
+
+def _z_columns(errors: ParameterErrors | None, when: str) -> dict[str, float]:
+    """``z_<unknown>_<when>`` (error / bound at the truth) and ``..._at_estimate`` (error / the estimate's bound); NaN without errors."""
+    out = {}
+    for i, name in enumerate(("mdf", "bx", "by", "bz")):
+        out[f"z_{name}_{when}"] = math.nan if errors is None else float(errors.z[i])
+        out[f"z_{name}_{when}_at_estimate"] = (
+            math.nan if errors is None else float(errors.error[i] / errors.crlb_std_at_estimate[i])
+        )
+    return out
 
 
 def run_suite(
@@ -116,7 +128,8 @@ def run_suite(
 
 
 def summarise(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Per hidden effect: logs, correct %, verdict counts, residual RMS / noise after, RMS of the z-scores after."""
+    """Per hidden effect: logs, correct %, verdict counts, residual RMS / noise after, RMS of the z-scores before and
+    after (bound at the truth; ``..._at_estimate``: the estimates' own bounds)."""
     out = []
     for effect in dict.fromkeys(r["effect"] for r in rows):
         group = [r for r in rows if r["effect"] == effect]
@@ -132,10 +145,11 @@ def summarise(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
             "wall_time_s_mean": float(np.mean([r["wall_time_s"] for r in group])),
         }
         for name in ("mdf", "bx", "by", "bz"):
-            before = np.array([r[f"z_{name}_before"] for r in group])
-            after = np.array([r[f"z_{name}_after"] for r in named]) if named else np.array([math.nan])
-            entry[f"z_rms_{name}_before"] = float(np.sqrt(np.mean(before**2)))
-            entry[f"z_rms_{name}_after"] = float(np.sqrt(np.mean(after**2)))
+            for bound in ("", "_at_estimate"):
+                before = np.array([r[f"z_{name}_before{bound}"] for r in group])
+                after = np.array([r[f"z_{name}_after{bound}"] for r in named]) if named else np.array([math.nan])
+                entry[f"z_rms_{name}_before{bound}"] = float(np.sqrt(np.mean(before**2)))
+                entry[f"z_rms_{name}_after{bound}"] = float(np.sqrt(np.mean(after**2)))
         out.append(entry)
     return out
 

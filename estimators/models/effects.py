@@ -30,13 +30,14 @@ plausible (it absorbs something else), and each term adds its physics (a payload
 the slosh mass cannot exceed the liquid left in the tank).
 
 The simulator implements the same effects independently as physics (:mod:`spaceid_gym.effects`); tests
-compare the two.
+compare the two. Both share the field names of ``truth.json``'s ``hidden_effects``:
+:meth:`EffectTerm.from_truth` reads a term's unknowns from a simulated truth.
 """
 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -107,6 +108,9 @@ class EffectTerm(ABC):
     names: tuple[str, ...]
     #: effects this one contains as a special case (nested models)
     nests: ClassVar[tuple[str, ...]] = ()
+    #: the ``hidden_effects`` fields of ``truth.json`` (:mod:`spaceid_gym.effects`) that hold this term's unknowns,
+    #: in order, each with its number of values (see :meth:`from_truth`)
+    truth_fields: tuple[tuple[str, int], ...]
 
     def __init__(self, nominal: FloatArray, lower: FloatArray, upper: FloatArray) -> None:
         self.nominal = np.asarray(nominal, dtype=float)
@@ -126,6 +130,24 @@ class EffectTerm(ABC):
     def starts(self) -> list[FloatArray]:
         """Starting points (k_e,) for a local fit of this term from a fit without it (default: the nominal)."""
         return [self.nominal.copy()]
+
+    def from_truth(self, hidden: Mapping[str, Any]) -> FloatArray:
+        """This term's unknowns (k_e,) in a simulated truth: ``hidden`` is ``truth.json``'s ``hidden_effects``.
+
+        Each of :attr:`truth_fields` is flattened (row-major) into its place; a field the truth does not have
+        is off there (its part of the nominal), as is the whole term for a log without the effect.
+        """
+        theta, offset = self.nominal.copy(), 0
+        for field, size in self.truth_fields:
+            if field in hidden:
+                value = np.ravel(np.asarray(hidden[field], dtype=float))
+                if value.size != size:
+                    raise SpaceIdInputError(
+                        f"hidden_effects: {field} has {value.size} values, the {self.name} term expects {size}"
+                    )
+                theta[offset : offset + size] = value
+            offset += size
+        return theta
 
     @abstractmethod
     def physical(self, theta: FloatArray) -> dict[str, Any]:
@@ -151,6 +173,7 @@ class _VectorTerm(EffectTerm):
 
     def __init__(self, robot: Robot) -> None:
         self.names = tuple(f"{self.prefix}_{axis}_{self.unit}" for axis in "xyz")
+        self.truth_fields = ((f"{self.name}_{self.unit}", 3),)
         super().__init__(np.zeros(3), -np.full(3, self.bound), np.full(3, self.bound))
 
     def physical(self, theta: FloatArray) -> dict[str, Any]:
@@ -183,10 +206,12 @@ class ExternalTorque(EffectTerm):
     def __init__(self, robot: Robot, drift: bool = False) -> None:
         names = [f"momentum_{a}_Nms" for a in "xyz"] + [f"torque_{a}_Nm" for a in "xyz"]
         bounds = [2.0] * 3 + [0.01] * 3
+        fields = [("initial_momentum_Nms", 3), ("external_torque_Nm", 3)]
         if drift:
             names += [f"torque_rate_{a}_Nm_s" for a in "xyz"]
             bounds += [1e-4] * 3
-        self.names, self.drift = tuple(names), drift
+            fields.append(("external_torque_rate_Nm_s", 3))
+        self.names, self.drift, self.truth_fields = tuple(names), drift, tuple(fields)
         super().__init__(np.zeros(len(names)), -np.array(bounds), np.array(bounds))
 
     def angular_momentum(self, theta: FloatArray, context: EffectContext) -> FloatArray:
@@ -228,6 +253,7 @@ class GyroScale(EffectTerm):
 
     def __init__(self, robot: Robot) -> None:
         self.names = tuple(f"scale_{r}{c}" for r in "xyz" for c in "xyz")
+        self.truth_fields = (("gyro_scale_misalignment", 9),)
         super().__init__(np.zeros(9), np.full(9, -0.02), np.full(9, 0.02))
 
     def measure(self, omega: FloatArray, theta: FloatArray, context: EffectContext) -> FloatArray:
@@ -247,6 +273,7 @@ class Delay(EffectTerm):
     name = "delay"
     stage = "measurement"
     names = ("delay_s",)
+    truth_fields = (("delay_s", 1),)
 
     def __init__(self, robot: Robot) -> None:
         super().__init__(np.zeros(1), np.array([-0.1]), np.array([0.1]))
@@ -298,6 +325,7 @@ class Payload(EffectTerm):
 
         ranges = PayloadParameters(robot)
         self.names = ranges.names
+        self.truth_fields = (("payload_params10", 10),)
         super().__init__(ranges.nominal, ranges.lower, ranges.upper)
 
     def starts(self) -> list[FloatArray]:
@@ -370,6 +398,7 @@ class Slosh(EffectTerm):
     name = "slosh"
     stage = "slosh"
     names = ("slosh_mass_kg", "slosh_frequency_hz", "slosh_damping_ratio")
+    truth_fields = tuple((field, 1) for field in names)
     #: starting frequencies (Hz) of the local fits: the cost is multimodal in the frequency
     START_FREQUENCIES_HZ = (0.15, 0.3, 0.6)
 
