@@ -38,7 +38,7 @@ from numpy.typing import NDArray
 from scipy import stats
 
 from estimators.arm_identification import Preparation, fit, raw_period
-from estimators.diagnostics.diagnose import EXPLAINED_FRACTION, NO_MISSING_EFFECT, UNEXPLAINED
+from estimators.diagnostics.diagnose import EXPLAINED_FRACTION, NO_MISSING_EFFECT, UNEXPLAINED, CandidateScores
 from estimators.diagnostics.residuals import Segment, failing_segments
 from estimators.linear_ls import weighted_lstsq
 from estimators.models.arm_model import ArmIdentificationModel, IdentificationRows
@@ -75,7 +75,7 @@ def extended_model(model: ArmIdentificationModel, candidate: str) -> ArmIdentifi
 
 
 @dataclass
-class ArmModelFit:
+class ArmModelFit(CandidateScores):
     """One weighted least-squares fit of a model on the training movements, and its scores (module docstring).
 
     ``n_rows`` is the effective number of independent rows, ``sum N_m / kappa_m``; ``residual_rms`` (n,) per joint.
@@ -87,12 +87,6 @@ class ArmModelFit:
     chi2: float
     n_rows: float
     residual_rms: FloatArray
-    bic: float = math.nan
-    delta_bic: float = math.nan
-    lr_statistic: float = math.nan
-    p_value: float = math.nan
-    significant: bool = False
-    explained_fraction: float = math.nan
 
     @property
     def n_params(self) -> int:
@@ -106,12 +100,7 @@ class ArmModelFit:
             "model": self.model.describe(),
             "n_params": self.n_params,
             "chi2": self.chi2,
-            "bic": self.bic,
-            "delta_bic": self.delta_bic,
-            "lr_statistic": self.lr_statistic,
-            "p_value": self.p_value,
-            "significant": self.significant,
-            "explained_fraction": self.explained_fraction,
+            **self.scores(),
             "residual_rms_per_joint": self.residual_rms.tolist(),
         }
 

@@ -68,8 +68,33 @@ NO_MISSING_EFFECT = "none"
 UNEXPLAINED = "unexplained"
 
 
+@dataclass(kw_only=True)
+class CandidateScores:
+    """A candidate fit's scores against the baseline (filled in once every model is fitted; ``nan`` until then):
+    ``bic``, ``delta_bic`` (to the baseline), ``lr_statistic``, ``p_value``, ``significant`` and
+    ``explained_fraction`` (of the baseline's excess over the noise)."""
+
+    bic: float = math.nan
+    delta_bic: float = math.nan
+    lr_statistic: float = math.nan
+    p_value: float = math.nan
+    significant: bool = False
+    explained_fraction: float = math.nan
+
+    def scores(self) -> dict[str, Any]:
+        """The scores as a JSON-able dict."""
+        return {
+            "bic": self.bic,
+            "delta_bic": self.delta_bic,
+            "lr_statistic": self.lr_statistic,
+            "p_value": self.p_value,
+            "significant": self.significant,
+            "explained_fraction": self.explained_fraction,
+        }
+
+
 @dataclass
-class ModelFit:
+class ModelFit(CandidateScores):
     """One model fitted to the log and its scores.
 
     Attributes:
@@ -96,14 +121,7 @@ class ModelFit:
     physical: dict[str, Any]
     implausible: list[str]
     wall_time_s: float
-    # scores, filled in by :func:`diagnose` once every model is fitted
-    chi2: float = math.nan
-    bic: float = math.nan
-    delta_bic: float = math.nan
-    lr_statistic: float = math.nan
-    p_value: float = math.nan
-    significant: bool = False
-    explained_fraction: float = math.nan
+    chi2: float = math.nan  # filled in by :func:`diagnose` once every model is fitted
 
     @property
     def residual_rms_rad_s(self) -> float:
@@ -124,14 +142,9 @@ class ModelFit:
             "rss": self.rss,
             "attitude_chi2": self.attitude_chi2,
             "chi2": self.chi2,
-            "bic": self.bic,
-            "delta_bic": self.delta_bic,
-            "lr_statistic": self.lr_statistic,
-            "p_value": self.p_value,
-            "significant": self.significant,
+            **self.scores(),
             "plausible": self.plausible,
             "implausible": list(self.implausible),
-            "explained_fraction": self.explained_fraction,
             "parameters": {n: float(v) for n, v in zip(self.names, self.theta, strict=True)},
             "physical": _jsonable(self.physical),
             "wall_time_s": self.wall_time_s,
