@@ -26,7 +26,7 @@ import time
 
 import numpy as np
 
-from estimators.arm_identification import Preparation, fit, held_out_error, physically_consistent, processed_noise_floor
+from estimators.arm_identification import Preparation, fit, physically_consistent, prediction_error, processed_noise_floor
 from estimators.evaluation import estimator_from_spec
 from estimators.linear_problem import LinearIdentificationProblem
 from estimators.models.arm_model import ArmIdentificationModel
@@ -69,7 +69,7 @@ def run_seed(seed: int, duration_s: float, budget: int, preparation: Preparation
     rows = []
     for label, spec in specs.items():
         estimate = fit(model, {"train": train_rows}, estimator_from_spec(spec, seed=seed))
-        error = held_out_error(model, estimate.theta, held_rows, floor)
+        error = prediction_error(model, estimate.theta, held_rows, floor)
         z = (estimate.theta - beta_true) / crlb
         rows.append(
             {

@@ -3,7 +3,7 @@
 Data -> :func:`load_movements` (real UR5 movement folders, or simulated dataset folders) -> :meth:`Preparation.rows`
 (uniform time, zero-phase low-pass of the states, acceleration by differentiation, the model's regressor filtered
 with the effort's filter, decimation) -> :func:`fit` (an :class:`~estimators.models.arm_model.ArmIdentificationModel`
-problem on the training movements, any registered estimator) -> :func:`held_out_error` on the validation movements
+problem on the training movements, any registered estimator) -> :func:`prediction_error` on the validation movements
 -> :func:`leave_one_out` tables.
 
 Figures (the source's, per joint ``j`` of a held-out movement, over its samples):
@@ -174,8 +174,8 @@ def fit(model: ArmIdentificationModel, train: Mapping[str, IdentificationRows], 
 
 # ---------------------------------------------------------------------- validation
 @dataclass
-class HeldOutError:
-    """Prediction error of one model on one prepared movement.
+class PredictionError:
+    """Prediction error of one model on one prepared movement (held out, or in the fit).
 
     Attributes:
         movement: its name.
@@ -218,16 +218,16 @@ class HeldOutError:
         }
 
 
-def held_out_error(
+def prediction_error(
     model: ArmIdentificationModel, beta: FloatArray, rows: IdentificationRows, noise_floor: FloatArray | None = None
-) -> HeldOutError:
+) -> PredictionError:
     """The figures of base parameters ``beta`` (r,) on one movement's rows (module docstring)."""
     log = rows.log
     residual = log.effort - model.predict(beta, rows)
     relative = 100.0 * np.linalg.norm(residual, axis=0) / np.maximum(np.linalg.norm(log.effort, axis=0), 1e-300)
     overall = 100.0 * float(np.linalg.norm(residual) / max(np.linalg.norm(log.effort), 1e-300))
     rms = np.sqrt(np.mean(residual**2, axis=0))
-    return HeldOutError(log.name, relative, overall, rms, noise_floor, residual)
+    return PredictionError(log.name, relative, overall, rms, noise_floor, residual)
 
 
 def raw_period(raw_log: ArmLog) -> float:
@@ -248,11 +248,11 @@ def processed_noise_floor(preparation: Preparation, raw_std: FloatArray | None, 
 # ---------------------------------------------------------------------- leave one movement out
 @dataclass
 class CrossValidationRow:
-    """One held-out movement, one estimator, one model: the estimate's facts and its :class:`HeldOutError`."""
+    """One held-out movement, one estimator, one model: the estimate's facts and its :class:`PredictionError`."""
 
     model: str
     estimator: str
-    error: HeldOutError
+    error: PredictionError
     consistent: bool | None
     wall_time_s: float
     n_evaluations: float
@@ -303,7 +303,7 @@ def leave_one_out(
             train = {name: item for name, item in movements.items() if name != held}
             for label, estimator in estimators.items():
                 estimate = fit(model, train, estimator)
-                error = held_out_error(model, estimate.theta, movements[held], (noise_floors or {}).get(held))
+                error = prediction_error(model, estimate.theta, movements[held], (noise_floors or {}).get(held))
                 rows.append(
                     CrossValidationRow(
                         model_label, label, error, physically_consistent(estimate), estimate.wall_time_s, estimate.n_evaluations

@@ -77,6 +77,42 @@ class Estimate:
     n_samples: int
     extra: dict[str, Any] = field(default_factory=dict)
 
+    @classmethod
+    def of_problem(
+        cls,
+        problem: Any,
+        theta: FloatArray,
+        *,
+        estimator: str,
+        options: dict[str, Any],
+        seed: int | None,
+        cost_history: FloatArray | list[float],
+        wall_time_s: float,
+        extra: dict[str, Any] | None,
+        **assessment: Any,
+    ) -> Estimate:
+        """The estimate of ``theta`` (k,) on ``problem`` (an identification problem: parameters, cost, counters), with the
+        run's facts and the problem's ``assessment`` of it (``theta_std``, ``identifiable``, ``insufficient_excitation``,
+        ``physical``, ``physical_std``, ``noise_std_rad_s``, ``noise_source``): what every problem's ``make_estimate``
+        shares."""
+        params = problem.parameters
+        return cls(
+            estimator=estimator,
+            options=options,
+            seed=seed,
+            parameterisation=params.name,
+            names=tuple(params.names),
+            theta=theta,
+            cost=float(problem.cost(theta, count=False)[0]),
+            cost_history=np.asarray(cost_history, dtype=float),
+            n_evaluations=problem.n_evaluations,
+            n_model_samples=problem.n_model_samples,
+            wall_time_s=float(wall_time_s),
+            n_samples=problem.n_samples,
+            extra=dict(extra or {}),
+            **assessment,
+        )
+
     @property
     def residual_rms_rad_s(self) -> float:
         """RMS residual over the log's samples and axes, rad/s."""

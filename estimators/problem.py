@@ -304,27 +304,22 @@ class IdentificationProblem:
         std = cramer_rao_std(scaled) * width
         identifiable, messages = identifiability(params.names, std, width, "log")
         physical, physical_std = _derived_with_std(params, theta, scaled, width, identifiable)
-        return Estimate(
+        return Estimate.of_problem(
+            self,
+            theta,
             estimator=estimator,
             options=options,
             seed=seed,
-            parameterisation=params.name,
-            names=tuple(params.names),
-            theta=theta,
+            cost_history=cost_history,
+            wall_time_s=wall_time_s,
+            extra=extra,
             theta_std=std,
             identifiable=identifiable,
             insufficient_excitation=messages,
             physical=physical,
             physical_std=physical_std,
-            cost=float(self.cost(theta, count=False)[0]),
             noise_std_rad_s=sigma,
             noise_source=source,
-            cost_history=np.asarray(cost_history, dtype=float),
-            n_evaluations=self.n_evaluations,
-            n_model_samples=self.n_model_samples,
-            wall_time_s=float(wall_time_s),
-            n_samples=self.n_samples,
-            extra=dict(extra or {}),
         )
 
 

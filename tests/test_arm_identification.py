@@ -12,10 +12,10 @@ import pytest
 from estimators.arm_identification import (
     Preparation,
     fit,
-    held_out_error,
     leave_one_out,
     load_movements,
     physically_consistent,
+    prediction_error,
     processed_noise_floor,
     summary_table,
 )
@@ -65,7 +65,7 @@ def test_parallel_filtering_keeps_the_model_exact_where_filtering_the_states_doe
     beta = model.base.to_base(simulated["p_true"])
     rows = Preparation().rows(model, log)
     relative = np.sqrt(np.mean((rows.log.effort - model.predict(beta, rows)) ** 2, axis=0) / np.mean(rows.log.effort**2, axis=0))
-    assert relative.max() < 1e-4
+    assert relative.max() < 2e-5
     states = prepare_for_identification(log, 4.0, 5)
     naive = states.effort - model.log_regressor(states) @ beta
     naive_relative = np.sqrt(np.mean(naive**2, axis=0) / np.mean(states.effort**2, axis=0))
@@ -98,7 +98,7 @@ def test_wls_and_consistent_improved_abc_reach_the_noise_floor_and_the_bound(mod
         raw, raw @ beta_true, model.base.names, beta_true - 1, beta_true + 1, row_std=np.tile(noise, clean.n_samples)
     ).crlb_std(beta_true)
     wls = fit(model, {"train": train_rows}, estimator_from_spec("wls"))
-    error = held_out_error(model, wls.theta, held_rows, floor)
+    error = prediction_error(model, wls.theta, held_rows, floor)
     # a 20 s random excitation (the README's figures: 30 s optimised, benchmarks/ur5_simulated.py): looser bounds
     assert error.overall_noise_ratio < 1.3
     assert np.sqrt(np.mean(((wls.theta - beta_true) / bound) ** 2)) < 2.5
@@ -107,7 +107,7 @@ def test_wls_and_consistent_improved_abc_reach_the_noise_floor_and_the_bound(mod
     )
     assert physically_consistent(colony) is True
     assert colony.cost_history[-1] <= colony.extra["colony_cost"]
-    assert held_out_error(model, colony.theta, held_rows, floor).overall_noise_ratio < 1.35
+    assert prediction_error(model, colony.theta, held_rows, floor).overall_noise_ratio < 1.35
 
 
 def test_diagnose_names_missing_friction_and_adding_it_reaches_the_noise_floor(ur5, model, simulated) -> None:
@@ -121,9 +121,8 @@ def test_diagnose_names_missing_friction_and_adding_it_reaches_the_noise_floor(u
     assert best is not None and best.model.regressor.friction.terms == FRICTION
     noise = np.asarray(simulated["train"].truth["noise"]["torque_std_Nm"])
     floor = processed_noise_floor(preparation, noise, logs["train"])
-    rows = preparation.rows(best.model, logs["train"])
-    before = held_out_error(without, diagnosis.baseline.theta, preparation.rows(without, logs["train"]), floor)
-    after = held_out_error(best.model, best.theta, rows, floor)
+    before = prediction_error(without, diagnosis.baseline.theta, diagnosis.baseline.rows["train"], floor)
+    after = prediction_error(best.model, best.theta, best.rows["train"], floor)
     assert before.overall_noise_ratio > 10 and after.overall_noise_ratio < 1.1
     # the model with friction is complete: nothing else is named
     assert diagnose_arm(model, logs, preparation).verdict == "none"
@@ -135,7 +134,7 @@ def test_where_it_fails_flags_a_push_on_the_arm(model, simulated) -> None:
     push = np.zeros_like(held.effort)
     push[(t > 8.0) & (t < 10.0), 1:3] = [4.0, 3.0]  # N m on the shoulder and elbow for 2 s
     logs = {"train": simulated["train"].simulation.log, "pushed": dataclasses.replace(held, effort=held.effort + push)}
-    failing = where_it_fails(model, logs)
+    failing = where_it_fails(model, Preparation().all_rows(model, logs))
     name, worst = failing.ranked()[0]
     assert name == "pushed"
     assert worst.t_start_s - held.t_s[0] < 10.0 and worst.t_end_s - held.t_s[0] > 8.0
@@ -175,7 +174,7 @@ def test_consistency_of_a_model_with_a_free_offset(ur5) -> None:
 
 
 @pytest.mark.skipif(not UR5_REAL.is_dir(), reason=f"the real UR5 logs are not at {UR5_REAL}")
-def test_real_ur5_friction_lowers_the_held_out_error(ur5) -> None:
+def test_real_ur5_friction_lowers_the_prediction_error(ur5) -> None:
     names = ["Movement_No8_Singularity_Free_1", "Movement_No9_Singularity_Free_NoDist", "Movement_No5_Acc_slow_no_disturbance"]
     logs = load_movements(UR5_REAL, names)
     models = {"friction": ArmIdentificationModel.build(ur5, FRICTION), "none": ArmIdentificationModel.build(ur5, ())}

@@ -29,7 +29,7 @@ pushed the arm (``WDist``, ``w_disturbance``).
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -66,11 +66,16 @@ def extended_model(model: ArmIdentificationModel, candidate: str) -> ArmIdentifi
     """``model`` with the candidate's terms added (same robot and torque constants), or ``None`` if it has them all."""
     if candidate not in CANDIDATES:
         raise SpaceIdInputError(f"candidate: unknown {candidate!r}; expected one of {', '.join(CANDIDATES)}")
-    terms, armature = CANDIDATES[candidate]
+    return _with_terms(model, *CANDIDATES[candidate])
+
+
+def _with_terms(model: ArmIdentificationModel, terms: Iterable[str], armature: bool) -> ArmIdentificationModel | None:
+    """``model`` with the friction ``terms`` (and ``armature``) added, or ``None`` if it has them all."""
     present = set(model.regressor.friction.terms)
-    if set(terms) <= present and (not armature or model.regressor.armature):
+    wanted = present | set(terms)
+    if wanted == present and (not armature or model.regressor.armature):
         return None
-    friction = tuple(t for t in FRICTION_TERMS if t in present | set(terms))
+    friction = tuple(t for t in FRICTION_TERMS if t in wanted)
     return ArmIdentificationModel.build(model.robot, friction, model.regressor.armature or armature, model.torque_constants_Nm_A)
 
 
@@ -78,7 +83,8 @@ def extended_model(model: ArmIdentificationModel, candidate: str) -> ArmIdentifi
 class ArmModelFit(CandidateScores):
     """One weighted least-squares fit of a model on the training movements, and its scores (module docstring).
 
-    ``n_rows`` is the effective number of independent rows, ``sum N_m / kappa_m``; ``residual_rms`` (n,) per joint.
+    ``n_rows`` is the effective number of independent rows, ``sum N_m / kappa_m``; ``residual_rms`` (n,) per joint;
+    ``rows`` the movements' identification rows for this model.
     """
 
     label: str
@@ -87,6 +93,7 @@ class ArmModelFit(CandidateScores):
     chi2: float
     n_rows: float
     residual_rms: FloatArray
+    rows: dict[str, IdentificationRows] = field(default_factory=dict, repr=False)
 
     @property
     def n_params(self) -> int:
@@ -185,7 +192,7 @@ def _weighted_fit(
     )
     weights = (np.ones_like(residual) if row_std is None else 1.0 / row_std**2) / kappa
     rms = np.sqrt(np.bincount(problem.row_group, residual**2) / np.bincount(problem.row_group))
-    return ArmModelFit(label, model, theta, float(weights @ residual**2), float(np.sum(1.0 / kappa)), rms)
+    return ArmModelFit(label, model, theta, float(weights @ residual**2), float(np.sum(1.0 / kappa)), rms, rows)
 
 
 def _correlation(model: ArmIdentificationModel, theta: FloatArray, rows: Mapping[str, IdentificationRows]) -> ResidualCorrelation:
@@ -225,9 +232,8 @@ def diagnose_arm(
     names = list(CANDIDATES) if candidates is None else list(candidates)
     extended = {name: extended_model(model, name) for name in names}
     extended = {name: m for name, m in extended.items() if m is not None}
-    everything = model
-    for name in extended:
-        everything = extended_model(everything, name) or everything
+    added = [CANDIDATES[name] for name in extended]
+    everything = _with_terms(model, [t for terms, _ in added for t in terms], any(a for _, a in added)) or model
     noise_std = _weighted_fit("all", everything, logs, preparation, None).residual_rms
     baseline = _weighted_fit("baseline", model, logs, preparation, noise_std)
     fits = [_weighted_fit(name, m, logs, preparation, noise_std) for name, m in extended.items()]
@@ -243,7 +249,7 @@ def diagnose_arm(
         f.significant = f.p_value < alpha / max(len(fits), 1)
         f.explained_fraction = f.lr_statistic / excess if excess > 0 else 0.0
     fits.sort(key=lambda f: f.bic)
-    correlation = _correlation(model, baseline.theta, preparation.all_rows(model, logs))
+    correlation = _correlation(model, baseline.theta, baseline.rows)
     significant = [f for f in fits if f.significant]
     if not significant:
         verdict, reason = NO_MISSING_EFFECT, "no candidate term is significant"
@@ -311,8 +317,7 @@ class FailingPeriods:
 
 def where_it_fails(
     model: ArmIdentificationModel,
-    logs: Mapping[str, ArmLog],
-    preparation: Preparation | None = None,
+    rows: Mapping[str, IdentificationRows],
     estimator: str = "wls",
     window_s: float = 2.0,
     confidence: float = 0.999,
@@ -321,10 +326,9 @@ def where_it_fails(
     against the movement's typical error level (:class:`FailingPeriods`): a window is flagged when its mean square
     exceeds that level at ``confidence`` (Holm-corrected F test with the level's degrees of freedom taken as one per
     window and joint). Model error that is the same all along a movement is not flagged; an outburst (a push on the
-    arm, a collision, a payload picked up) is."""
-    if len(logs) < 2:
-        raise SpaceIdInputError(f"where it fails: needs at least two movements (held-out residuals), got {list(logs)}")
-    rows = (preparation or Preparation()).all_rows(model, logs)
+    arm, a collision, a payload picked up) is. ``rows``: the movements' identification rows for ``model``."""
+    if len(rows) < 2:
+        raise SpaceIdInputError(f"where it fails: needs at least two movements (held-out residuals), got {list(rows)}")
     residuals = {}
     for held, item in rows.items():
         estimate = fit(model, {n: r for n, r in rows.items() if n != held}, make_estimator(estimator))

@@ -244,10 +244,11 @@ class ArmIdentificationModel:
         """Per-joint coefficient columns after the links: indices (m,), lower (m,), upper (m,) bounds."""
         robot, friction = self.robot, self.regressor.friction
         fraction = FRICTION_FRACTION_OF_LIMIT * robot.torque_limit_Nm
+        zero = np.zeros_like(fraction)
         per_term = {
-            "coulomb": (0.0 * fraction, fraction),
-            "viscous": (0.0 * fraction, fraction / robot.dq_limit_rad_s),
-            "stribeck": (0.0 * fraction, fraction),
+            "coulomb": (zero, fraction),
+            "viscous": (zero, fraction / robot.dq_limit_rad_s),
+            "stribeck": (zero, fraction),
             "offset": (-fraction, fraction),
         }
         lower = [per_term[t][0][j] for j in range(self.n_joints) for t in friction.terms]

@@ -181,7 +181,7 @@ def run_arm_identify(args: argparse.Namespace) -> None:
     relative error, its overall figure and, for simulated data, the error in noise units) and one overlay per held-out
     movement (``overlay_<movement>.png``).
     """
-    from estimators.arm_identification import fit, held_out_error
+    from estimators.arm_identification import fit, prediction_error
     from estimators.diagnostics.plots import plot_overlay
     from estimators.evaluation import estimator_from_spec
     from spaceid_gym.log import write_json_atomic
@@ -205,7 +205,7 @@ def run_arm_identify(args: argparse.Namespace) -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     estimate.extra.update(model=model.describe(), preparation=preparation.as_dict())
     estimate.write_json(args.out / "estimate.json")
-    errors = [held_out_error(model, estimate.theta, rows[name], floors[name]) for name in validate]
+    errors = [prediction_error(model, estimate.theta, rows[name], floors[name]) for name in validate]
     write_json_atomic(
         args.out / "validation.json",
         {
@@ -283,8 +283,8 @@ def run_arm_cross_validate(args: argparse.Namespace) -> None:
 def run_arm_diagnose(args: argparse.Namespace) -> None:
     """``spaceid arm diagnose``: which joint term is missing (friction, armature, offset), where the model fails;
     with ``--apply``, the error before and after adding it. Writes ``diagnosis.json``."""
-    from estimators.arm_identification import held_out_error
-    from estimators.diagnostics.arm_diagnose import diagnose_arm, extended_model, where_it_fails
+    from estimators.arm_identification import prediction_error
+    from estimators.diagnostics.arm_diagnose import diagnose_arm, where_it_fails
     from spaceid_gym.log import write_json_atomic
 
     preparation, logs, floors = _movements(args, _names(args.movements))
@@ -293,21 +293,19 @@ def run_arm_diagnose(args: argparse.Namespace) -> None:
     print(f"model: {model.describe()}")
     print(f"verdict: {diagnosis.verdict}" + (f" ({diagnosis.family})" if diagnosis.family else "") + f": {diagnosis.reason}")
     print("candidates (best BIC first): " + "; ".join(f"{f.label} dBIC {f.delta_bic:.0f}" for f in diagnosis.candidates))
-    final = model
+    final = diagnosis.baseline
     if args.apply and diagnosis.best() is not None:
-        final = extended_model(model, diagnosis.verdict) or model
-        before_rows, after_rows = preparation.all_rows(model, logs), preparation.all_rows(final, logs)
-        before = {n: held_out_error(model, diagnosis.baseline.theta, before_rows[n], floors[n]) for n in logs}
-        after_fit = diagnosis.best()
-        assert after_fit is not None
-        after = {n: held_out_error(final, after_fit.theta, after_rows[n], floors[n]) for n in logs}
+        best = diagnosis.best()
+        assert best is not None
+        before = {n: prediction_error(model, diagnosis.baseline.theta, diagnosis.baseline.rows[n], floors[n]) for n in logs}
+        after = {n: prediction_error(best.model, best.theta, best.rows[n], floors[n]) for n in logs}
         diagnosis.extra["applied"] = {
-            "model": final.describe(),
+            "model": best.model.describe(),
             "before": [e.to_dict() for e in before.values()],
             "after": [e.to_dict() for e in after.values()],
         }
         print(
-            f"added {diagnosis.verdict}: fit error per joint (%) before -> after"
+            f"added {diagnosis.verdict}: fit error over all joints (all movements in the fit) before -> after"
             + (" (x noise floor)" if all(f is not None for f in floors.values()) else "")
         )
         for name in logs:
@@ -316,11 +314,12 @@ def run_arm_diagnose(args: argparse.Namespace) -> None:
             if a.overall_noise_ratio is not None and b.overall_noise_ratio is not None:
                 line += f" | {b.overall_noise_ratio:.2f} -> {a.overall_noise_ratio:.3f} x noise"
             print(line)
+        final = best
     if len(logs) >= 2:
-        failing = where_it_fails(final, logs, preparation)
+        failing = where_it_fails(final.model, final.rows)
         diagnosis.extra["where_it_fails"] = failing.to_dict()
         ranked = failing.ranked()
-        print(f"where it fails ({final.describe()}, held-out residual vs the movement's typical level, worst first):")
+        print(f"where it fails ({final.model.describe()}, held-out residual vs the movement's typical level, worst first):")
         for name, segment in ranked[:8]:
             t0 = logs[name].t_s[0]
             print(

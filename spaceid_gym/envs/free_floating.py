@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -13,6 +12,7 @@ from gymnasium import spaces
 from numpy.typing import NDArray
 
 from spaceid_gym.effects import HiddenEffects, parse_effect_spec, parse_hidden_effects
+from spaceid_gym.envs.actions import checked_action
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.information import add_information, cramer_rao_std
 from spaceid_gym.log import MeasurementLog
@@ -259,11 +259,7 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         return self._observation(self._record(state)), {"truth": self.truth()}
 
     def step(self, action: NDArray[np.float32]) -> tuple[NDArray[np.float32], float, bool, bool, dict[str, Any]]:
-        a = np.asarray(action, dtype=float)
-        if a.shape != self.action_space.shape:
-            raise SpaceIdInputError(f"action: expected shape {self.action_space.shape}, got {a.shape}")
-        if not math.isfinite(a.sum()):  # NaN and +-inf propagate through the sum
-            raise SpaceIdInputError(f"action: expected finite values in [-1, 1], got {a.tolist()}")
+        a = checked_action(action, self.action_space)
         # actions beyond [-1, 1] are clipped by the servo's rate limit
         state = self.simulator.step(a * self.robot.rate_limit_rad_s, self.control_period_s)
         sample = self._record(state)

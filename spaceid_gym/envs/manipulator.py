@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -18,6 +17,7 @@ from spaceid_gym.arm.log import ArmLog
 from spaceid_gym.arm.regressor import ArmRegressor, BaseParameterSet
 from spaceid_gym.arm.robot import ArmRobot, load_arm
 from spaceid_gym.arm.simulator import ArmSensorModel, ArmSimulator, ParameterPrior, TrackingController, nominal_parameters
+from spaceid_gym.envs.actions import checked_action
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.information import add_information, cramer_rao_std
 
@@ -245,11 +245,7 @@ class ManipulatorIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         return obs, {"truth": self.truth()}
 
     def step(self, action: NDArray[np.float32]) -> tuple[NDArray[np.float32], float, bool, bool, dict[str, Any]]:
-        a = np.asarray(action, dtype=float)
-        if a.shape != self.action_space.shape:
-            raise SpaceIdInputError(f"action: expected shape {self.action_space.shape}, got {a.shape}")
-        if not math.isfinite(a.sum()):  # NaN and +-inf propagate through the sum
-            raise SpaceIdInputError(f"action: expected finite values in [-1, 1], got {a.tolist()}")
+        a = checked_action(action, self.action_space)
         a = np.clip(a, -1.0, 1.0)
         if self.action_mode == "rate":  # towards the commanded rate, at most at the acceleration limit
             command = (a * self.robot.dq_limit_rad_s - self._dq_ref) / self.control_period_s
