@@ -178,6 +178,23 @@ class IdentificationProblem:
             self.n_model_samples += omega.shape[0] * omega.shape[1]
         return omega
 
+    def base_rate(self, theta: FloatArray, count: bool = True) -> FloatArray:
+        """The base's own rate (P, T, 3), rad/s, base body frame, for ``theta`` (P, k): :meth:`predict` without the
+        measurement effects (``gyro_bias``, ``gyro_scale``, ``delay``), i.e. what rotates the base."""
+        theta = np.atleast_2d(np.asarray(theta, dtype=float))
+        if self._effects is None:
+            return self.predict(theta, count=count)
+        omega = self._effect_rates(theta, slice(None))[0]
+        if count:
+            self.n_model_samples += omega.shape[0] * omega.shape[1]
+        return omega
+
+    def base_rate_jacobian(self, theta: FloatArray, count: bool = True) -> FloatArray:
+        """``d base_rate / d theta`` (3T, k) at ``theta`` (k,): :meth:`jacobian` of :meth:`base_rate`."""
+        if self._effects is None:
+            return self.jacobian(theta, count)
+        return self._difference_jacobian(np.asarray(theta, dtype=float), count, self.base_rate)
+
     def gyro_error(self, theta: FloatArray) -> FloatArray:
         """What the measurement effects add to the base rate, ``omega_gyro - omega_base`` (T, 3), rad/s, at ``theta`` (k,).
 
@@ -239,8 +256,11 @@ class IdentificationProblem:
             self.n_model_samples += self.n_params * self.n_samples
         return jac.reshape(-1, self.n_params)
 
-    def _difference_jacobian(self, theta: FloatArray, count: bool) -> FloatArray:
-        """Central differences (3T, k) with steps of 1e-6 of each search width (effects: no analytic Jacobian).
+    def _difference_jacobian(
+        self, theta: FloatArray, count: bool, predict: Callable[..., FloatArray] | None = None
+    ) -> FloatArray:
+        """Central differences (3T, k) of ``predict`` (default :meth:`predict`) with steps of 1e-6 of each search
+        width (effects: no analytic Jacobian).
 
         All 2k points go through one batched prediction; counted as 2k evaluations.
         """
@@ -249,7 +269,7 @@ class IdentificationProblem:
         index = np.arange(self.n_params)
         points[2 * index, index] += step
         points[2 * index + 1, index] -= step
-        omega = self.predict(points, count=count)  # (2k, T, 3)
+        omega = (predict or self.predict)(points, count=count)  # (2k, T, 3)
         jac = (omega[0::2] - omega[1::2]) / (2.0 * step[:, None, None])
         return jac.reshape(self.n_params, -1).T
 
@@ -268,14 +288,26 @@ class IdentificationProblem:
         jac = self.jacobian(theta, count=False)
         return (jac.T @ jac) / (sigma * sigma)
 
-    def _range_scaled_fisher(self, theta: FloatArray, noise_std_rad_s: float | None) -> FloatArray:
-        """Fisher information in units of the search ranges (k, k): rank decisions compare like with like (kg vs m)."""
+    def _range_scaled_fisher(
+        self, theta: FloatArray, noise_std_rad_s: float | None, extra_information: FloatArray | None = None
+    ) -> FloatArray:
+        """Fisher information (plus ``extra_information`` (k, k), another measurement's, if given) in units of the
+        search ranges (k, k): rank decisions compare like with like (kg vs m)."""
         width = self.parameters.width
-        return self.fisher(theta, noise_std_rad_s) * np.outer(width, width)
+        fisher = self.fisher(theta, noise_std_rad_s)
+        if extra_information is not None:
+            fisher = fisher + extra_information
+        return fisher * np.outer(width, width)
 
-    def crlb_std(self, theta: FloatArray, noise_std_rad_s: float | None = None) -> FloatArray:
-        """Cramér-Rao standard deviations (k,) at ``theta``; ``inf`` in directions the log does not inform."""
-        return cramer_rao_std(self._range_scaled_fisher(theta, noise_std_rad_s)) * self.parameters.width
+    def crlb_std(
+        self, theta: FloatArray, noise_std_rad_s: float | None = None, extra_information: FloatArray | None = None
+    ) -> FloatArray:
+        """Cramér-Rao standard deviations (k,) at ``theta``; ``inf`` in directions the log does not inform.
+
+        ``extra_information`` (k, k): the Fisher information of a further measurement of the same log fitted
+        together with the gyro (the star tracker's, :meth:`~estimators.models.attitude_channel.AttitudeChannel.fisher`).
+        """
+        return cramer_rao_std(self._range_scaled_fisher(theta, noise_std_rad_s, extra_information)) * self.parameters.width
 
     def crlb_physical_std(self, theta: FloatArray, noise_std_rad_s: float | None = None) -> dict[str, Any]:
         """Cramér-Rao std of the physical quantities (``base_mass_kg``, ...) at ``theta`` (delta method)."""
@@ -294,13 +326,17 @@ class IdentificationProblem:
         cost_history: FloatArray | list[float],
         wall_time_s: float,
         extra: dict[str, Any] | None = None,
+        extra_information: FloatArray | None = None,
     ) -> Estimate:
-        """Wrap ``theta`` as an :class:`Estimate`: bound, identifiability, derived physical quantities."""
+        """Wrap ``theta`` as an :class:`Estimate`: bound, identifiability, derived physical quantities.
+
+        ``extra_information`` (k, k): as in :meth:`crlb_std`, for an estimate fitted to more than the gyro.
+        """
         theta = np.asarray(theta, dtype=float).copy()
         params = self.parameters
         sigma, source = self.noise_std(theta)
         width = params.width
-        scaled = self._range_scaled_fisher(theta, sigma)
+        scaled = self._range_scaled_fisher(theta, sigma, extra_information)
         std = cramer_rao_std(scaled) * width
         identifiable, messages = identifiability(params.names, std, width, "log")
         physical, physical_std = _derived_with_std(params, theta, scaled, width, identifiable)

@@ -8,8 +8,12 @@ For a model (robot, parameterisation, effects already in it) and a log, :func:`d
    starting points: several slosh frequencies, a light payload), keeping the best;
 3. scores every fit on the whole likelihood: the gyro residuals, ``RSS / sigma^2`` with ``sigma`` the
    residual std of the best-fitting model (``sqrt(RSS / (3T - k))``), plus, when the log has attitude,
-   the gyro-stellar consistency (:mod:`estimators.diagnostics.gyro_stellar`), which tells a biased gyro
-   from a real rotation. For a candidate:
+   the star tracker's rotation against the model's (:mod:`estimators.models.attitude_channel`), which
+   sees the integral of the base rate (a slow torque, a momentum) far more sharply than the gyro and
+   is blind to gyro errors (bias, scale, delay), so it also tells a biased gyro from a real rotation. With
+   attitude, every fit (the baseline refitted from the estimator's result) minimises both channels
+   together, weighted by their noise (:class:`ChannelWeights`: the gyro's from the baseline's residual, the
+   star tracker's from the data). For a candidate:
 
    * ``lr_statistic = X_baseline - X_candidate``, chi-square with ``k_e`` degrees of freedom when the
      effect is absent (nested models): ``p_value``; *significant* below ``alpha / (number of
@@ -36,7 +40,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
@@ -45,10 +49,10 @@ from scipy.optimize import least_squares
 from scipy.stats import chi2
 
 from estimators.base import Estimator
-from estimators.diagnostics.gyro_stellar import GyroStellarCheck
 from estimators.diagnostics.residuals import ResidualAnalysis, analyse_residuals
 from estimators.estimate import Estimate
 from estimators.least_squares import LevenbergMarquardt, interior_start
+from estimators.models.attitude_channel import AttitudeChannel
 from estimators.models.effects import EFFECT_TERMS
 from estimators.parameters import WithEffects
 from estimators.problem import IdentificationModel, IdentificationProblem
@@ -93,6 +97,15 @@ class CandidateScores:
         }
 
 
+@dataclass(frozen=True)
+class ChannelWeights:
+    """Per-sample noise std of the two channels, which weight them in a joint fit: the gyro's (rad/s, per axis)
+    and the star tracker's (rad, per axis; see :class:`~estimators.models.attitude_channel.AttitudeChannel`)."""
+
+    gyro_std_rad_s: float
+    attitude_std_rad: float
+
+
 @dataclass
 class ModelFit(CandidateScores):
     """One model fitted to the log and its scores.
@@ -102,7 +115,7 @@ class ModelFit(CandidateScores):
         effect: the candidate added (``None`` for the baseline).
         theta: the fitted unknowns (k,); ``names`` their names.
         rss: sum of squared gyro residuals, (rad/s)^2; ``n_residuals`` 3T; ``n_params`` k.
-        attitude_chi2: gyro-stellar chi-square at the fit (``None`` without attitude in the log), over
+        attitude_chi2: the attitude channel's chi-square at the fit (``None`` without attitude in the log), over
             ``n_attitude_values`` values.
         physical: the fitted quantities (base and effects), as in the estimate file.
         implausible: reasons why the fitted effect is not physical (empty if plausible).
@@ -162,6 +175,8 @@ class Diagnosis:
         analysis: residual analysis of the baseline fit.
         noise_std_rad_s: the gyro noise std used for the scores (residual std of the best model).
         alpha: the family-wise significance level; ``reason``: why this verdict, in a sentence.
+        weights: the noise levels weighting the gyro and the attitude channel in every fit (``None``: the log has
+            no attitude, the gyro alone was fitted).
     """
 
     verdict: str
@@ -171,7 +186,7 @@ class Diagnosis:
     noise_std_rad_s: float
     alpha: float
     reason: str
-    attitude_check: bool
+    weights: ChannelWeights | None
     baseline_estimate: Estimate | None = field(default=None, repr=False)
 
     def fit_of(self, effect: str | None) -> ModelFit | None:
@@ -190,7 +205,7 @@ class Diagnosis:
             "reason": self.reason,
             "alpha": self.alpha,
             "noise_std_rad_s": self.noise_std_rad_s,
-            "attitude_check": self.attitude_check,
+            "attitude_channel": None if self.weights is None else asdict(self.weights),
             "baseline": self.baseline.to_dict(),
             "candidates": [c.to_dict() for c in self.candidates],
             "residual_analysis": self.analysis.to_dict(),
@@ -219,19 +234,17 @@ def fit_model(
     log: MeasurementLog,
     estimator: Estimator | None = None,
     starts: list[FloatArray] | None = None,
-    check: GyroStellarCheck | None = None,
     effect: str | None = None,
-    noise_std_rad_s: float | None = None,
+    weights: ChannelWeights | None = None,
 ) -> tuple[ModelFit, Estimate | None]:
     """Fit ``model`` to ``log``: with ``estimator`` (returns its estimate), or by least squares from each of ``starts``.
 
-    From ``starts``, a model with measurement effects (gyro bias, scale, delay) is fitted to the gyro
-    residuals and the gyro-stellar check together (``check``, weighted with ``noise_std_rad_s`` against
-    the check's own noise), since the attitude is what tells a gyro error from a real rotation; other
-    models to the gyro residuals alone (the check does not depend on them).
+    With ``weights`` and a log with attitude, the least-squares fits minimise the likelihood of both channels,
+    ``|gyro residual|^2 / sigma_gyro^2 + |attitude residual|^2 / sigma_st^2``; otherwise the gyro residuals alone.
     """
     begin = time.perf_counter()
     problem = model.problem(log)
+    channel = AttitudeChannel.of(model, log) if weights is not None else None
     estimate = None
     if estimator is not None:
         estimate = estimator.fit_problem(problem)
@@ -239,53 +252,65 @@ def fit_model(
     else:
         if not starts:
             raise SpaceIdInputError("fit_model: give an estimator or at least one start")
-        measurement = isinstance(problem.parameters, WithEffects) and any(
-            t.stage == "measurement" for t in problem.parameters.terms
-        )
-        if check is not None and measurement and noise_std_rad_s is not None:
-            results = [_joint_fit(problem, check, noise_std_rad_s, start) for start in starts]
+        if channel is not None and weights is not None:
+            results = [_joint_fit(problem, channel, weights, start) for start in starts]
+            scores = [_joint_chi2(problem, channel, weights, x) for x in results]
         else:
             polish = LevenbergMarquardt(max_iterations=MAX_ITERATIONS)
             results = [polish.polish(problem, start).theta for start in starts]
-        scores = [_chi2(problem, x, check, noise_std_rad_s) for x in results]
+            scores = [float(r @ r) for r in (problem.residuals(x, count=False) for x in results)]
         theta = results[int(np.argmin(scores))]
-    return _scored(problem, theta, model, check, effect, time.perf_counter() - begin), estimate
+    attitude_chi2 = None
+    if channel is not None and weights is not None:
+        attitude = channel.residuals(theta) / weights.attitude_std_rad
+        attitude_chi2 = float(attitude @ attitude)
+    fit = _scored(problem, theta, model, effect, time.perf_counter() - begin)
+    fit.attitude_chi2 = attitude_chi2
+    fit.n_attitude_values = 0 if channel is None else channel.n_values
+    return fit, estimate
 
 
 #: accepted least-squares steps per start of a candidate fit
 MAX_ITERATIONS = 30
 
 
-def _chi2(problem: IdentificationProblem, theta: FloatArray, check: GyroStellarCheck | None, sigma: float | None) -> float:
-    """Gyro RSS (over ``sigma^2`` if given) plus the gyro-stellar chi-square if ``check``: what a candidate fit minimises."""
-    r = problem.residuals(theta, count=False)
-    value = float(r @ r) / (sigma * sigma if sigma else 1.0)
-    return value + (check.chi2(problem.gyro_error(theta)) if check is not None and sigma else 0.0)
+def _joint_residuals(
+    problem: IdentificationProblem, channel: AttitudeChannel, weights: ChannelWeights, theta: FloatArray
+) -> FloatArray:
+    """``[gyro residual / sigma_gyro; attitude residual / sigma_st]`` (6T,) at ``theta`` (k,)."""
+    return np.concatenate(
+        (problem.residuals(theta) / weights.gyro_std_rad_s, channel.residuals(theta) / weights.attitude_std_rad)
+    )
 
 
-def _joint_fit(problem: IdentificationProblem, check: GyroStellarCheck, sigma: float, start: FloatArray) -> FloatArray:
-    """Least squares on ``[gyro residual / sigma; gyro-stellar residual / its std]`` from ``start`` (k,)."""
+def _joint_chi2(problem: IdentificationProblem, channel: AttitudeChannel, weights: ChannelWeights, theta: FloatArray) -> float:
+    r = _joint_residuals(problem, channel, weights, theta)
+    return float(r @ r)
+
+
+def _joint_fit(
+    problem: IdentificationProblem, channel: AttitudeChannel, weights: ChannelWeights, start: FloatArray
+) -> FloatArray:
+    """Least squares on both channels (:func:`_joint_residuals`) from ``start`` (k,), analytic Jacobians, in the box."""
     params = problem.parameters
 
-    def residuals(x: FloatArray) -> FloatArray:
-        gyro = problem.residuals(x) / sigma
-        attitude = (check.rate_error - check.predicted(problem.gyro_error(x))) / check.std
-        return np.concatenate((gyro, attitude.ravel()))
+    def jacobian(x: FloatArray) -> FloatArray:
+        return np.vstack((problem.jacobian(x) / weights.gyro_std_rad_s, channel.jacobian(x) / weights.attitude_std_rad))
 
-    x0 = np.clip(start, params.lower, params.upper)
     result = least_squares(
-        residuals, x0, bounds=(params.lower, params.upper), x_scale=params.width, method="trf", max_nfev=20 * MAX_ITERATIONS
+        lambda x: _joint_residuals(problem, channel, weights, x),
+        np.clip(start, params.lower, params.upper),
+        jac=jacobian,
+        bounds=(params.lower, params.upper),
+        x_scale=params.width,
+        method="trf",
+        max_nfev=2 * MAX_ITERATIONS,
     )
     return np.asarray(result.x, dtype=float)
 
 
 def _scored(
-    problem: IdentificationProblem,
-    theta: FloatArray,
-    model: IdentificationModel,
-    check: GyroStellarCheck | None,
-    effect: str | None,
-    wall: float,
+    problem: IdentificationProblem, theta: FloatArray, model: IdentificationModel, effect: str | None, wall: float
 ) -> ModelFit:
     residual = problem.residuals(theta, count=False)
     params = problem.parameters
@@ -304,8 +329,8 @@ def _scored(
         rss=float(residual @ residual),
         n_residuals=residual.size,
         n_params=params.n_params,
-        attitude_chi2=None if check is None else check.chi2(problem.gyro_error(theta)),
-        n_attitude_values=0 if check is None else check.n_values,
+        attitude_chi2=None,
+        n_attitude_values=0,
         physical=params.physical(theta),
         implausible=implausible,
         wall_time_s=wall,
@@ -344,9 +369,14 @@ def diagnose(
     unknown = [c for c in names if c not in EFFECT_TERMS]
     if unknown:
         raise SpaceIdInputError(f"candidates: unknown effects {unknown}; expected names from {', '.join(EFFECT_TERMS)}")
-    check = GyroStellarCheck.from_log(log)
-    baseline, estimate = fit_model(model, log, estimator or make_estimator("hybrid"), check=check)
+    baseline, estimate = fit_model(model, log, estimator or make_estimator("hybrid"))
     sigma0 = math.sqrt(baseline.rss / (baseline.n_residuals - baseline.n_params))
+    weights = None
+    channel = AttitudeChannel.of(model, log)
+    if channel is not None:
+        # both channels from here on; the star tracker's noise from the data, the baseline refitted to both
+        weights = ChannelWeights(sigma0, channel.noise_std(baseline.theta))
+        baseline = fit_model(model, log, starts=[baseline.theta], weights=weights)[0]
     fits = []
     for name in names:
         extended = candidate_model(model, name)
@@ -356,7 +386,7 @@ def diagnose(
         # from the baseline fit, and once from the default start (a missing effect can drag the baseline far off)
         restart = interior_start(params)[: len(baseline.theta)]
         starts = [np.concatenate((baseline.theta, s)) for s in term.starts()] + [np.concatenate((restart, term.starts()[0]))]
-        fits.append(fit_model(extended, log, starts=starts, check=check, effect=name, noise_std_rad_s=sigma0)[0])
+        fits.append(fit_model(extended, log, starts=starts, effect=name, weights=weights)[0])
     sigma = _score(baseline, fits, alpha)
     analysis = analyse_residuals(
         log.t_s,
@@ -368,7 +398,7 @@ def diagnose(
     )
     verdict, reason = _verdict(baseline, fits, analysis, alpha)
     fits.sort(key=lambda f: f.bic)
-    return Diagnosis(verdict, baseline, fits, analysis, sigma, alpha, reason, check is not None, estimate)
+    return Diagnosis(verdict, baseline, fits, analysis, sigma, alpha, reason, weights, estimate)
 
 
 def _score(baseline: ModelFit, fits: list[ModelFit], alpha: float) -> float:
