@@ -223,6 +223,9 @@ class Diagnosis:
                 "significant": "yes" if c.significant else "no",
                 "plausible": "yes" if c.plausible else "no: " + "; ".join(c.implausible),
                 "residual RMS (rad/s)": f"{c.residual_rms_rad_s:.3g}",
+                "attitude chi-square / values": "no attitude"
+                if c.attitude_chi2 is None
+                else f"{c.attitude_chi2:.0f} / {c.n_attitude_values}",
                 "explained": f"{100 * c.explained_fraction:.0f} %",
             }
             for c in self.candidates
