@@ -242,8 +242,10 @@ def fit_model(
 ) -> tuple[ModelFit, Estimate | None]:
     """Fit ``model`` to ``log``: with ``estimator`` (returns its estimate), or by least squares from each of ``starts``.
 
-    With ``weights`` and a log with attitude, the least-squares fits minimise the likelihood of both channels,
-    ``|gyro residual|^2 / sigma_gyro^2 + |attitude residual|^2 / sigma_st^2``; otherwise the gyro residuals alone.
+    From ``starts``: least squares on the gyro residuals from each start. With ``weights`` and a log with attitude,
+    the result that is best on both channels is then refined on the likelihood of both,
+    ``|gyro residual|^2 / sigma_gyro^2 + |attitude residual|^2 / sigma_st^2`` (at most :data:`MAX_ITERATIONS`
+    residual evaluations); otherwise the best on the gyro is kept.
     """
     begin = time.perf_counter()
     problem = model.problem(log)
@@ -255,14 +257,15 @@ def fit_model(
     else:
         if not starts:
             raise SpaceIdInputError("fit_model: give an estimator or at least one start")
+        polish = LevenbergMarquardt(max_iterations=MAX_ITERATIONS)
+        results = [polish.polish(problem, start).theta for start in starts]
         if channel is not None and weights is not None:
-            results = [_joint_fit(problem, channel, weights, start) for start in starts]
+            # the gyro's minimum nearest each start, the best of them by both channels, refined on both
             scores = [_joint_chi2(problem, channel, weights, x) for x in results]
+            theta = _joint_fit(problem, channel, weights, results[int(np.argmin(scores))])
         else:
-            polish = LevenbergMarquardt(max_iterations=MAX_ITERATIONS)
-            results = [polish.polish(problem, start).theta for start in starts]
             scores = [float(r @ r) for r in (problem.residuals(x, count=False) for x in results)]
-        theta = results[int(np.argmin(scores))]
+            theta = results[int(np.argmin(scores))]
     attitude_chi2 = None
     if channel is not None and weights is not None:
         attitude = channel.residuals(theta) / weights.attitude_std_rad
@@ -307,7 +310,7 @@ def _joint_fit(
         bounds=(params.lower, params.upper),
         x_scale=params.width,
         method="trf",
-        max_nfev=2 * MAX_ITERATIONS,
+        max_nfev=MAX_ITERATIONS,
     )
     return np.asarray(result.x, dtype=float)
 
