@@ -207,4 +207,5 @@ def test_star_tracker_tells_a_torque_from_a_momentum(paper6: Robot) -> None:
             assert channel is not None and fit.attitude_chi2 is not None
             std = problem.crlb_std(fit.theta, sigma_gyro, channel.fisher(fit.theta, weights.attitude_std_rad))
             assert np.all(np.abs(fit.theta[7:10] - torque) < 4 * std[7:10])
+    print(f"torque vs momentum likelihood ratio: {statistics}")  # the README's figures (pytest -s)
     assert statistics["gyro"] < 50 and statistics["both"] > 1000, statistics

@@ -239,17 +239,22 @@ def fit_model(
     starts: list[FloatArray] | None = None,
     effect: str | None = None,
     weights: ChannelWeights | None = None,
+    channel: AttitudeChannel | None = None,
 ) -> tuple[ModelFit, Estimate | None]:
     """Fit ``model`` to ``log``: with ``estimator`` (returns its estimate), or by least squares from each of ``starts``.
 
     From ``starts``: least squares on the gyro residuals from each start. With ``weights`` and a log with attitude,
     the result that is best on both channels is then refined on the likelihood of both,
     ``|gyro residual|^2 / sigma_gyro^2 + |attitude residual|^2 / sigma_st^2`` (at most :data:`MAX_ITERATIONS`
-    residual evaluations); otherwise the best on the gyro is kept.
+    residual evaluations); otherwise the best on the gyro is kept. ``channel``: ``model``'s attitude channel on
+    ``log`` if the caller has built it already (else built here when ``weights`` are given).
     """
     begin = time.perf_counter()
     problem = model.problem(log)
-    channel = AttitudeChannel.of(model, log) if weights is not None else None
+    if weights is None:
+        channel = None
+    elif channel is None:
+        channel = AttitudeChannel.of(model, log)
     estimate = None
     if estimator is not None:
         estimate = estimator.fit_problem(problem)
@@ -259,7 +264,8 @@ def fit_model(
             raise SpaceIdInputError("fit_model: give an estimator or at least one start")
         polish = LevenbergMarquardt(max_iterations=MAX_ITERATIONS)
         results = [polish.polish(problem, start).theta for start in starts]
-        if channel is not None and weights is not None:
+        if channel is not None:
+            assert weights is not None
             # the gyro's minimum nearest each start, the best of them by both channels, refined on both
             scores = [_joint_chi2(problem, channel, weights, x) for x in results]
             theta = _joint_fit(problem, channel, weights, results[int(np.argmin(scores))])
@@ -267,13 +273,12 @@ def fit_model(
             scores = [float(r @ r) for r in (problem.residuals(x, count=False) for x in results)]
             theta = results[int(np.argmin(scores))]
     attitude_chi2 = None
-    if channel is not None and weights is not None:
+    if channel is not None:
+        assert weights is not None
         attitude = channel.residuals(theta) / weights.attitude_std_rad
         attitude_chi2 = float(attitude @ attitude)
-    fit = _scored(problem, theta, model, effect, time.perf_counter() - begin)
-    fit.attitude_chi2 = attitude_chi2
-    fit.n_attitude_values = 0 if channel is None else channel.n_values
-    return fit, estimate
+    n_attitude = 0 if channel is None else channel.n_values
+    return _scored(problem, theta, model, effect, (attitude_chi2, n_attitude), time.perf_counter() - begin), estimate
 
 
 #: accepted least-squares steps per start of a candidate fit
@@ -316,8 +321,14 @@ def _joint_fit(
 
 
 def _scored(
-    problem: IdentificationProblem, theta: FloatArray, model: IdentificationModel, effect: str | None, wall: float
+    problem: IdentificationProblem,
+    theta: FloatArray,
+    model: IdentificationModel,
+    effect: str | None,
+    attitude: tuple[float | None, int],
+    wall: float,
 ) -> ModelFit:
+    """The fit at ``theta``: gyro residual, plausibility, and ``attitude`` (its chi-square or ``None``, its values)."""
     residual = problem.residuals(theta, count=False)
     params = problem.parameters
     implausible: list[str] = []
@@ -335,8 +346,8 @@ def _scored(
         rss=float(residual @ residual),
         n_residuals=residual.size,
         n_params=params.n_params,
-        attitude_chi2=None,
-        n_attitude_values=0,
+        attitude_chi2=attitude[0],
+        n_attitude_values=attitude[1],
         physical=params.physical(theta),
         implausible=implausible,
         wall_time_s=wall,
@@ -382,7 +393,7 @@ def diagnose(
     if channel is not None:
         # both channels from here on; the star tracker's noise from the data, the baseline refitted to both
         weights = ChannelWeights(sigma0, channel.noise_std(baseline.theta))
-        baseline = fit_model(model, log, starts=[baseline.theta], weights=weights)[0]
+        baseline = fit_model(model, log, starts=[baseline.theta], weights=weights, channel=channel)[0]
     fits = []
     for name in names:
         extended = candidate_model(model, name)
