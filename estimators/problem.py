@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from estimators.estimate import Estimate
-from estimators.models.effects import EffectContext, EffectPrediction, make_terms, parse_effects
+from estimators.models.effects import USABLE_FUEL_FRACTION, EffectContext, EffectPrediction, Slosh, make_terms, parse_effects
 from estimators.models.momentum_model import MomentumModel, Samples
 from estimators.parameters import FuelParameters, Parameterisation, WithEffects, make_parameterisation
 from spaceid_gym.errors import SpaceIdInputError
@@ -90,7 +90,7 @@ def _parameterisation(
         return params if isinstance(params, Parameterisation) else make_parameterisation(params, robot, **options)
     bounds = {k: np.asarray(options.pop(k), dtype=float) for k in ("lower", "upper") if k in options}
     base = params if isinstance(params, Parameterisation) else make_parameterisation(params, robot, **options)
-    terms = make_terms(effects, robot, _tank_locator(base))
+    terms = make_terms(effects, robot, *_slosh_locators(base))
     n_total = base.n_params + sum(t.n_params for t in terms)
     for key, value in bounds.items():
         if value.shape != (n_total,):
@@ -99,7 +99,7 @@ def _parameterisation(
             )
     if bounds and not isinstance(params, Parameterisation):
         base = make_parameterisation(params, robot, **options, **{k: v[: base.n_params] for k, v in bounds.items()})
-        terms = make_terms(effects, robot, _tank_locator(base))
+        terms = make_terms(effects, robot, *_slosh_locators(base))
     offset = base.n_params
     for term in terms:
         part = slice(offset, offset + term.n_params)
@@ -124,12 +124,24 @@ def identifiability(
     return identifiable, messages
 
 
-def _tank_locator(base: Parameterisation) -> Callable[[FloatArray], FloatArray] | None:
-    """Where a slosh mass sits for ``theta_base`` (P, k_base): the fuel parameters' tank (full-tank CoM + bf); else ``None`` (the default)."""
+def _slosh_locators(
+    base: Parameterisation,
+) -> tuple[Callable[[FloatArray], FloatArray] | None, Callable[[FloatArray], FloatArray] | None]:
+    """Where a slosh mass sits (P, 3) and how much liquid is left to slosh (P,) kg, for ``theta_base`` (P, k_base):
+    with the fuel parameters, the tank (full-tank CoM + bf) and the usable fuel minus the fuel consumed (at least 0);
+    else ``(None, None)`` (the term's defaults: the full-tank CoM and the usable fuel)."""
     if not isinstance(base, FuelParameters):
-        return None
+        return None, None
     full_com = np.asarray(base.base_full.com_m, dtype=float)
-    return lambda theta_base: full_com + np.asarray(theta_base, dtype=float)[:, 1:4]
+    usable_kg = USABLE_FUEL_FRACTION * base.base_full.mass_kg
+
+    def tank(theta_base: FloatArray) -> FloatArray:
+        return full_com + np.asarray(theta_base, dtype=float)[:, 1:4]
+
+    def liquid(theta_base: FloatArray) -> FloatArray:
+        return np.maximum(usable_kg - np.asarray(theta_base, dtype=float)[:, 0], 0.0)
+
+    return tank, liquid
 
 
 class IdentificationProblem:
@@ -210,7 +222,14 @@ class IdentificationProblem:
         params = self.parameters
         assert isinstance(params, WithEffects) and self._effects is not None
         base10, payload10 = params.composite(theta)
-        return self._effects.predict(base10, payload10, params.term_parts(theta), _slosh_tank(params, theta), samples)
+        parts = params.term_parts(theta)
+        tank = np.zeros((len(theta), 3))
+        slosh = next((t for t in params.terms if isinstance(t, Slosh)), None)
+        if slosh is not None:
+            theta_base = params.base_part(theta)
+            tank = np.ascontiguousarray(slosh.tank_of(theta_base), dtype=float)
+            parts[slosh] = slosh.moving_part(parts[slosh], theta_base)
+        return self._effects.predict(base10, payload10, parts, tank, samples)
 
     def cost(self, theta: FloatArray, samples: Samples = slice(None), count: bool = True) -> FloatArray:
         """Mean squared residual (rad/s)^2 over ``samples`` and the 3 axes, for ``theta`` (P, k): (P,)."""
@@ -357,14 +376,6 @@ class IdentificationProblem:
             noise_std_rad_s=sigma,
             noise_source=source,
         )
-
-
-def _slosh_tank(params: WithEffects, theta: FloatArray) -> FloatArray:
-    """Tank positions (P, 3) for a slosh term (zeros if the model has none)."""
-    slosh = next((t for t in params.terms if t.name == "slosh"), None)
-    if slosh is None:
-        return np.zeros((len(theta), 3))
-    return np.ascontiguousarray(slosh.tank_of(params.base_part(theta)), dtype=float)  # type: ignore[attr-defined]
 
 
 def _derived_with_std(

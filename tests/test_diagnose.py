@@ -14,8 +14,10 @@ from estimators.diagnostics.diagnose import (
     UNEXPLAINED,
     ChannelWeights,
     ModelFit,
+    _score,
     _verdict,
     diagnose,
+    explained_fraction,
     fit_model,
     nested_p_value,
 )
@@ -160,6 +162,31 @@ def test_nesting_test_is_corrected_for_the_containers_compared_only(nested_stati
     verdict, reason = _verdict(baseline, [momentum, torque, bias], analysis=None, alpha=0.01)  # type: ignore[arg-type]
     assert verdict == expected, reason
     assert ("contains initial_momentum" in reason) == (expected == "external_torque")
+
+
+def test_explained_fraction_is_capped_at_all_of_the_excess() -> None:
+    assert explained_fraction(10.0, 40.0) == pytest.approx(0.25)
+    assert explained_fraction(50.0, 40.0) == 1.0
+    assert explained_fraction(29.0, -0.5) == 1.0  # nothing left above the noise: it explains all there is
+    assert explained_fraction(-3.0, 40.0) == 0.0
+
+
+def test_a_significant_effect_is_named_when_the_baseline_is_at_the_noise_in_aggregate() -> None:
+    """The scores of the suite's ``gyro_scale`` log of seed 0 (``paper6``, 60 s, both channels): the scale and
+    misalignment lower the chi-square by 29 (9 unknowns, p = 6e-4), while the baseline's total chi-square is at
+    its degrees of freedom because the star tracker's part (which the effect does not touch) sits 20 below its
+    count. A fraction of a non-positive excess used to be 0, which made the verdict ``unexplained``."""
+    n_gyro, n_attitude = 9000, 8997
+    scale = dataclasses.replace(_scored_fit("gyro_scale", 13, 0.0), rss=float(n_gyro - 13), attitude_chi2=8977.0)
+    baseline = dataclasses.replace(_scored_fit(None, 4, 0.0), rss=float(n_gyro - 13) + 29.0, attitude_chi2=8977.0)
+    for fit in (scale, baseline):
+        fit.n_residuals, fit.n_attitude_values = n_gyro, n_attitude
+    _score(baseline, [scale], alpha=0.01)
+    assert scale.lr_statistic == pytest.approx(29.0)
+    assert baseline.chi2 - (n_gyro + n_attitude - 4) <= 0.0
+    assert scale.significant and scale.explained_fraction == 1.0
+    verdict, reason = _verdict(baseline, [scale], analysis=None, alpha=0.01)  # type: ignore[arg-type]
+    assert verdict == "gyro_scale", reason
 
 
 def test_parameter_errors_use_the_bound_at_the_truth(paper6: Robot, short_fuel_episode) -> None:

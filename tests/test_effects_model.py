@@ -68,6 +68,30 @@ def test_slosh_model_explains_most_of_the_simulated_slosh(paper6: Robot) -> None
     assert np.abs(error).max() < 0.05 * 1.44e-4
 
 
+def test_slosh_mass_beyond_the_liquid_left_moves_only_that_liquid(short_fuel_episode) -> None:
+    """The suite's crash (initial_momentum log of seed 3): a fit wandered to all 137.5 kg of usable fuel consumed
+    with 122.6 kg sloshing. Subtracting that from the base left a body with an indefinite inertia, the oscillator
+    grew without bound and the prediction overflowed. The sloshing mass is now capped at the liquid left (usable
+    fuel minus the fuel consumed), the prediction there equals the one with exactly that mass, and the fit is
+    implausible."""
+    ep = short_fuel_episode
+    problem = IdentificationModel(ep.robot, "fuel", effects="slosh").problem(ep.log)
+    slosh = problem.parameters.terms[-1]
+    usable = slosh.upper[0]
+    base = np.array([usable - 20.0, -0.44, -0.49, 0.5])  # 20 kg left, tank at a corner of the box
+    too_much, all_left = np.concatenate((base, [122.6, 0.4, 0.03])), np.concatenate((base, [20.0, 0.4, 0.03]))
+    predicted = problem.predict(np.stack((too_much, all_left)), count=False)
+    assert np.all(np.isfinite(predicted))
+    np.testing.assert_array_equal(predicted[0], predicted[1])
+    assert np.abs(predicted[1] - problem.predict(np.concatenate((base, [0.0, 0.4, 0.03])), count=False)[0]).max() > 1e-6
+    reasons = slosh.implausible(too_much[4:], None, too_much[:4])
+    assert any("exceeds the 20 kg of liquid left" in r for r in reasons), reasons
+    assert slosh.implausible(all_left[4:], None, all_left[:4]) == []
+    empty = np.concatenate(([usable + 5.0], base[1:], [122.6, 0.4, 0.03]))  # beyond the usable fuel: nothing sloshes
+    assert np.all(np.isfinite(problem.predict(empty, count=False)))
+    assert any("0 kg of liquid" in r for r in slosh.implausible(empty[4:], None, empty[:4]))
+
+
 def test_difference_jacobian_matches_the_analytic_one_on_the_base_columns(short_fuel_episode) -> None:
     """With effects the Jacobian is by central differences; at zero effect it equals the analytic one of the paper's model."""
     ep = short_fuel_episode

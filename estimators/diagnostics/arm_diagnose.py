@@ -38,7 +38,13 @@ from numpy.typing import NDArray
 from scipy import stats
 
 from estimators.arm_identification import Preparation, fit, raw_period
-from estimators.diagnostics.diagnose import EXPLAINED_FRACTION, NO_MISSING_EFFECT, UNEXPLAINED, CandidateScores
+from estimators.diagnostics.diagnose import (
+    EXPLAINED_FRACTION,
+    NO_MISSING_EFFECT,
+    UNEXPLAINED,
+    CandidateScores,
+    explained_fraction,
+)
 from estimators.diagnostics.residuals import Segment, failing_segments
 from estimators.linear_ls import weighted_lstsq
 from estimators.models.arm_model import ArmIdentificationModel, IdentificationRows
@@ -247,7 +253,7 @@ def diagnose_arm(
         f.lr_statistic = baseline.chi2 - f.chi2
         f.p_value = float(stats.chi2.sf(max(f.lr_statistic, 0.0), max(k, 1)))
         f.significant = f.p_value < alpha / max(len(fits), 1)
-        f.explained_fraction = f.lr_statistic / excess if excess > 0 else 0.0
+        f.explained_fraction = explained_fraction(f.lr_statistic, excess)
     fits.sort(key=lambda f: f.bic)
     correlation = _correlation(model, baseline.theta, baseline.rows)
     significant = [f for f in fits if f.significant]

@@ -72,11 +72,21 @@ NO_MISSING_EFFECT = "none"
 UNEXPLAINED = "unexplained"
 
 
+def explained_fraction(lr_statistic: float, excess: float) -> float:
+    """Share of the baseline's ``excess`` chi-square over the noise (``X_baseline - (n - k)``) that a candidate's
+    likelihood ratio ``lr_statistic`` removes, capped at 1: a candidate that brings the fit down to the noise
+    or below explains all of it, including when the baseline is already at the noise in aggregate
+    (``excess <= 0``: a weak effect that only the directed likelihood-ratio test sees)."""
+    if lr_statistic <= 0.0:
+        return 0.0
+    return 1.0 if excess <= lr_statistic else lr_statistic / excess
+
+
 @dataclass(kw_only=True)
 class CandidateScores:
     """A candidate fit's scores against the baseline (filled in once every model is fitted; ``nan`` until then):
     ``bic``, ``delta_bic`` (to the baseline), ``lr_statistic``, ``p_value``, ``significant`` and
-    ``explained_fraction`` (of the baseline's excess over the noise)."""
+    ``explained_fraction`` (of the baseline's excess over the noise, :func:`explained_fraction`)."""
 
     bic: float = math.nan
     delta_bic: float = math.nan
@@ -337,7 +347,7 @@ def _scored(
         term = next(t for t in params.terms if t.name == effect)
         part = np.arange(params.n_params)[params.term_parts(np.arange(params.n_params))[term].astype(int)]
         covariance = np.linalg.pinv(problem.fisher(theta), rcond=1e-12, hermitian=True)[np.ix_(part, part)]
-        implausible = term.implausible(params.term_parts(theta)[term], covariance)
+        implausible = term.implausible(params.term_parts(theta)[term], covariance, params.base_part(theta))
     return ModelFit(
         effects=model.effects,
         effect=effect,
@@ -434,7 +444,7 @@ def _score(baseline: ModelFit, fits: list[ModelFit], alpha: float) -> float:
         f.lr_statistic = baseline.chi2 - f.chi2
         f.p_value = float(chi2.sf(max(f.lr_statistic, 0.0), k))
         f.significant = f.p_value < alpha / max(len(fits), 1)
-        f.explained_fraction = f.lr_statistic / excess if excess > 0 else 0.0
+        f.explained_fraction = explained_fraction(f.lr_statistic, excess)
     return math.sqrt(sigma2)
 
 

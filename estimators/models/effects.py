@@ -153,10 +153,13 @@ class EffectTerm(ABC):
     def physical(self, theta: FloatArray) -> dict[str, Any]:
         """The fitted effect as physical quantities at ``theta`` (k_e,) (keys as in ``truth.json``'s ``hidden_effects``)."""
 
-    def implausible(self, theta: FloatArray, covariance: FloatArray | None = None) -> list[str]:
+    def implausible(
+        self, theta: FloatArray, covariance: FloatArray | None = None, theta_base: FloatArray | None = None
+    ) -> list[str]:
         """Reasons why ``theta`` (k_e,) is not physically plausible (empty if it is): by default, values on a search bound.
 
-        ``covariance`` (k_e, k_e), the fit's Cramér-Rao covariance, lets a term allow for the uncertainty of its test.
+        ``covariance`` (k_e, k_e), the fit's Cramér-Rao covariance, lets a term allow for the uncertainty of its test;
+        ``theta_base`` (k_base,), the base parameters of the same fit, lets it check against them (the slosh's liquid).
         """
         width = self.upper - self.lower
         on_bound = (theta <= self.lower + 1e-6 * width) | (theta >= self.upper - 1e-6 * width)
@@ -342,7 +345,9 @@ class Payload(EffectTerm):
             out.update(payload_com_m=body.com_m, payload_inertia_kgm2=body.inertia_com_kgm2)
         return out
 
-    def implausible(self, theta: FloatArray, covariance: FloatArray | None = None) -> list[str]:
+    def implausible(
+        self, theta: FloatArray, covariance: FloatArray | None = None, theta_base: FloatArray | None = None
+    ) -> list[str]:
         """Besides the bounds: the mass must be positive and the pseudo-inertia positive definite, each beyond
         3 standard deviations of its estimate when ``covariance`` is given (a small object's inertia is barely
         informed, and noise alone can make its estimate slightly unphysical)."""
@@ -392,7 +397,11 @@ class Slosh(EffectTerm):
     Integrated with RK4 at the log's sample period, starting at rest.
 
     Ranges: ``m_s`` in ``[0, usable fuel]``, ``f`` in ``[0.05, 2]`` Hz, ``zeta`` in ``[0.005, 1]``; nominal
-    ``m_s = 0`` (off).
+    ``m_s = 0`` (off). Only liquid still in the tank can slosh: ``liquid_of`` gives it for the base parameters
+    (with the fuel parameters, the usable fuel minus the fuel consumed; else the usable fuel). A larger ``m_s``
+    moves only the liquid there is (:meth:`moving_part`; the prediction is flat in ``m_s`` beyond it) and such a
+    fit is implausible: subtracting more than the liquid from the base leaves a "rest" that is not a body, whose
+    coupling makes the oscillator unstable (the prediction overflowed before this limit).
     """
 
     name = "slosh"
@@ -402,11 +411,23 @@ class Slosh(EffectTerm):
     #: starting frequencies (Hz) of the local fits: the cost is multimodal in the frequency
     START_FREQUENCIES_HZ = (0.15, 0.3, 0.6)
 
-    def __init__(self, robot: Robot, tank_of: Callable[[FloatArray], FloatArray] | None = None) -> None:
+    def __init__(
+        self,
+        robot: Robot,
+        tank_of: Callable[[FloatArray], FloatArray] | None = None,
+        liquid_of: Callable[[FloatArray], FloatArray] | None = None,
+    ) -> None:
         liquid_max_kg = USABLE_FUEL_FRACTION * robot.base_full.mass_kg
         super().__init__(np.array([0.0, 0.3, 0.05]), np.array([0.0, 0.05, 0.005]), np.array([liquid_max_kg, 2.0, 1.0]))
         full_com = np.asarray(robot.base_full.com_m, dtype=float)
         self.tank_of = tank_of if tank_of is not None else (lambda theta_base: np.broadcast_to(full_com, (len(theta_base), 3)))
+        self.liquid_of = liquid_of if liquid_of is not None else (lambda theta_base: np.full(len(theta_base), liquid_max_kg))
+
+    def moving_part(self, theta: FloatArray, theta_base: FloatArray) -> FloatArray:
+        """``theta`` (P, 3) with the slosh mass limited to the liquid left in the tank for ``theta_base`` (P, k_base)."""
+        out = np.array(theta, dtype=float)
+        out[:, 0] = np.minimum(out[:, 0], self.liquid_of(np.atleast_2d(theta_base)))
+        return out
 
     def starts(self) -> list[FloatArray]:
         return [np.array([0.1 * self.upper[0], f, 0.05]) for f in self.START_FREQUENCIES_HZ]
@@ -436,10 +457,16 @@ class Slosh(EffectTerm):
     def physical(self, theta: FloatArray) -> dict[str, Any]:
         return {"slosh_mass_kg": float(theta[0]), "slosh_frequency_hz": float(theta[1]), "slosh_damping_ratio": float(theta[2])}
 
-    def implausible(self, theta: FloatArray, covariance: FloatArray | None = None) -> list[str]:
-        reasons = super().implausible(theta, covariance)
+    def implausible(
+        self, theta: FloatArray, covariance: FloatArray | None = None, theta_base: FloatArray | None = None
+    ) -> list[str]:
+        reasons = super().implausible(theta, covariance, theta_base)
         if theta[0] <= 0.0:
             reasons.append("slosh mass is zero")
+        if theta_base is not None:
+            liquid = float(self.liquid_of(np.atleast_2d(theta_base))[0])
+            if theta[0] > liquid:
+                reasons.append(f"slosh mass {theta[0]:.4g} kg exceeds the {liquid:.4g} kg of liquid left in the tank")
         return reasons
 
 
@@ -599,12 +626,13 @@ def make_terms(
     spec: str | list[str] | tuple[str, ...] | None,
     robot: Robot,
     tank_of: Callable[[FloatArray], FloatArray] | None = None,
+    liquid_of: Callable[[FloatArray], FloatArray] | None = None,
 ) -> list[EffectTerm]:
     """The effect terms of ``spec`` (see :func:`parse_effects`) for ``robot``; ``tank_of`` places the slosh mass."""
     terms: list[EffectTerm] = []
     for name, options in parse_effects(spec):
         if name == "slosh":
-            terms.append(Slosh(robot, tank_of))
+            terms.append(Slosh(robot, tank_of, liquid_of))
         else:
             terms.append(EFFECT_TERMS[name](robot, **options))  # type: ignore[call-arg]
     return terms
