@@ -176,7 +176,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         elif args.command in ("diagnose", "report"):
             _diagnose_or_report(args)
         elif args.command == "diagnose-suite":
-            _diagnose_suite(args)
+            return _diagnose_suite(args)
         elif args.command == "arm":
             ARM_COMMANDS[args.arm_command](args)
         elif args.command == "demo":
@@ -302,8 +302,9 @@ def _diagnose_or_report(args: argparse.Namespace) -> None:
     print(f"wrote {', '.join(f'{args.out}/{w}' for w in written)} ({time.perf_counter() - start:.1f} s)")
 
 
-def _diagnose_suite(args: argparse.Namespace) -> None:
-    from estimators.diagnostics.suite import DIAGNOSTIC_EXCITATION, SUITE_EFFECTS, run_suite, write_suite
+def _diagnose_suite(args: argparse.Namespace) -> int:
+    """Runs the suite and writes it; exit code 1 (after writing) if the diagnosis of any log raised."""
+    from estimators.diagnostics.suite import DIAGNOSTIC_EXCITATION, SUITE_EFFECTS, failed_rows, run_suite, write_suite
 
     if args.jobs < 1 or args.seeds < 1:
         raise SpaceIdInputError(f"--jobs and --seeds: expected at least 1, got {args.jobs} and {args.seeds}")
@@ -324,6 +325,14 @@ def _diagnose_suite(args: argparse.Namespace) -> None:
     paths = write_suite(args.out, rows, info)
     print(paths["table"].read_text())
     print(f"{len(rows)} logs in {info['wall_time_s']:.0f} s; wrote {', '.join(p.name for p in paths.values())}")
+    failed = failed_rows(rows)
+    for row in failed:
+        print(
+            f"spaceid: error: diagnosis of the {row['effect']} log of seed {row['seed']} raised {row['error']}", file=sys.stderr
+        )
+    if failed:
+        print(f"spaceid: error: {len(failed)} of {len(rows)} logs failed (verdict 'error' in suite.csv)", file=sys.stderr)
+    return 1 if failed else 0
 
 
 def _truth_next_to(log_path: Path) -> dict | None:

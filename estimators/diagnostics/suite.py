@@ -13,13 +13,16 @@ errors in Cramér-Rao standard deviations, before and after (``z_*``: the bound 
 :func:`~estimators.diagnostics.workflow.parameter_errors`).
 
 ``spaceid diagnose-suite`` runs it and writes ``suite.csv`` (a row per log), ``summary.json`` and
-``table.md`` (per effect: verdicts, correct %, residual and parameter errors after).
+``table.md`` (per effect: verdicts, correct %, residual and parameter errors after). A log whose diagnosis
+raises does not stop the others: its row has the verdict ``error`` and the exception in ``error`` (counted as
+not correct), and the command exits non-zero after writing everything.
 """
 
 from __future__ import annotations
 
 import math
 import time
+import traceback
 from collections import Counter
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -121,10 +124,36 @@ def run_suite(
 
     cases = [(robot_name, effect, first_seed + s, duration_s) for effect in effects for s in range(seeds)]
     if jobs == 1:
-        return [run_case(*case) for case in tqdm(cases, desc="diagnose suite", unit="log")]
+        return [guarded_case(*case) for case in tqdm(cases, desc="diagnose suite", unit="log")]
     with ProcessPoolExecutor(max_workers=jobs) as pool:
-        futures = [pool.submit(run_case, *case) for case in cases]
+        futures = [pool.submit(guarded_case, *case) for case in cases]
         return [f.result() for f in tqdm(futures, desc="diagnose suite", unit="log")]
+
+
+#: the verdict of a log whose diagnosis raised
+ERROR_VERDICT = "error"
+
+
+def guarded_case(robot_name: str, effect: str, seed: int, duration_s: float = 60.0) -> dict[str, Any]:
+    """:func:`run_case`, or, if it raises, a row with the verdict ``error`` and the exception and where it was
+    raised in ``error`` (the suite goes on; :func:`failed_rows` lists these)."""
+    try:
+        return run_case(robot_name, effect, seed, duration_s)
+    except Exception as exc:  # recorded in the row and reported by the command, not hidden
+        frame = traceback.extract_tb(exc.__traceback__)[-1]
+        where = f"{Path(frame.filename).name}:{frame.lineno} in {frame.name}"
+        return {
+            "effect": effect,
+            "seed": seed,
+            "verdict": ERROR_VERDICT,
+            "correct": False,
+            "error": f"{type(exc).__name__}: {exc} ({where})",
+        }
+
+
+def failed_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The rows of logs whose diagnosis raised."""
+    return [r for r in rows if r["verdict"] == ERROR_VERDICT]
 
 
 def summarise(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -132,21 +161,22 @@ def summarise(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     after (bound at the truth; ``..._at_estimate``: the estimates' own bounds)."""
     out = []
     for effect in dict.fromkeys(r["effect"] for r in rows):
-        group = [r for r in rows if r["effect"] == effect]
+        every = [r for r in rows if r["effect"] == effect]
+        group = [r for r in every if r["verdict"] != ERROR_VERDICT]  # the figures: logs that were diagnosed
         named = [r for r in group if r["correct"]]
         entry: dict[str, Any] = {
             "effect": effect,
-            "logs": len(group),
-            "correct_percent": 100.0 * len(named) / len(group),
-            "verdicts": dict(Counter(r["verdict"] for r in group).most_common()),
-            "rms_over_noise_before_mean": float(np.mean([r["rms_over_noise_before"] for r in group])),
+            "logs": len(every),
+            "correct_percent": 100.0 * len(named) / len(every),
+            "verdicts": dict(Counter(r["verdict"] for r in every).most_common()),
+            "rms_over_noise_before_mean": float(np.mean([r["rms_over_noise_before"] for r in group])) if group else math.nan,
             "rms_over_noise_after_mean": float(np.mean([r["rms_over_noise_after"] for r in named])) if named else math.nan,
             "rms_over_noise_after_max": float(np.max([r["rms_over_noise_after"] for r in named])) if named else math.nan,
-            "wall_time_s_mean": float(np.mean([r["wall_time_s"] for r in group])),
+            "wall_time_s_mean": float(np.mean([r["wall_time_s"] for r in group])) if group else math.nan,
         }
         for name in ("mdf", "bx", "by", "bz"):
             for bound in ("", "_at_estimate"):
-                before = np.array([r[f"z_{name}_before{bound}"] for r in group])
+                before = np.array([r[f"z_{name}_before{bound}"] for r in group] or [math.nan])
                 after = np.array([r[f"z_{name}_after{bound}"] for r in named]) if named else np.array([math.nan])
                 entry[f"z_rms_{name}_before{bound}"] = float(np.sqrt(np.mean(before**2)))
                 entry[f"z_rms_{name}_after{bound}"] = float(np.sqrt(np.mean(after**2)))
@@ -180,8 +210,9 @@ def write_suite(out: str | Path, rows: list[dict[str, Any]], info: dict[str, Any
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     summary = summarise(rows)
+    columns = list(dict.fromkeys(key for row in rows for key in row))  # error rows have fewer, and an "error"
     return {
-        "csv": write_csv_atomic(out / "suite.csv", rows),
+        "csv": write_csv_atomic(out / "suite.csv", [{c: row.get(c, "") for c in columns} for row in rows]),
         "json": write_json_atomic(out / "summary.json", {"info": info, "summary": summary}),
         "table": write_text_atomic(out / "table.md", markdown_table(summary)),
     }
