@@ -628,7 +628,8 @@ def make_terms(
     tank_of: Callable[[FloatArray], FloatArray] | None = None,
     liquid_of: Callable[[FloatArray], FloatArray] | None = None,
 ) -> list[EffectTerm]:
-    """The effect terms of ``spec`` (see :func:`parse_effects`) for ``robot``; ``tank_of`` places the slosh mass."""
+    """The effect terms of ``spec`` (see :func:`parse_effects`) for ``robot``; ``tank_of`` places the slosh mass and
+    ``liquid_of`` gives the liquid left to slosh (see :class:`Slosh`)."""
     terms: list[EffectTerm] = []
     for name, options in parse_effects(spec):
         if name == "slosh":
