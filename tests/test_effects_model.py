@@ -90,6 +90,10 @@ def test_slosh_mass_beyond_the_liquid_left_moves_only_that_liquid(short_fuel_epi
     empty = np.concatenate(([usable + 5.0], base[1:], [122.6, 0.4, 0.03]))  # beyond the usable fuel: nothing sloshes
     assert np.all(np.isfinite(problem.predict(empty, count=False)))
     assert any("0 kg of liquid" in r for r in slosh.implausible(empty[4:], None, empty[:4]))
+    # local fits start inside what can slosh (the suite's slosh log of seed 9, 14 kg left, started at 13.75 kg
+    # from a baseline with 5.5 kg left and stayed on the flat side, flagged implausible)
+    assert [s[0] for s in slosh.starts(base)] == [10.0] * 3  # half of the 20 kg left
+    assert [s[0] for s in slosh.starts(np.array([10.0, 0.0, 0.0, 0.0]))] == pytest.approx([0.1 * usable] * 3)
 
 
 def test_difference_jacobian_matches_the_analytic_one_on_the_base_columns(short_fuel_episode) -> None:

@@ -412,7 +412,9 @@ def diagnose(
         term = params.terms[-1]
         # from the baseline fit, and once from the default start (a missing effect can drag the baseline far off)
         restart = interior_start(params)[: len(baseline.theta)]
-        starts = [np.concatenate((baseline.theta, s)) for s in term.starts()] + [np.concatenate((restart, term.starts()[0]))]
+        k_base = params.base.n_params
+        starts = [np.concatenate((baseline.theta, s)) for s in term.starts(baseline.theta[:k_base])]
+        starts.append(np.concatenate((restart, term.starts(restart[:k_base])[0])))
         fits.append(fit_model(extended, log, starts=starts, effect=name, weights=weights)[0])
     sigma = _score(baseline, fits, alpha)
     analysis = analyse_residuals(

@@ -37,7 +37,8 @@ from estimators.problem import IdentificationModel
 #: options of :class:`~agents.excitation.FourierExcitation` for the suite (see the module docstring)
 DIAGNOSTIC_EXCITATION: dict[str, Any] = {"base_frequency_hz": 0.05, "n_harmonics": 10}
 
-#: the effects hidden one at a time (the issue's catalogue), and ``none`` for clean logs
+#: the effects hidden one at a time (the issue's catalogue, with ``gyro_scale``, the scale-factor/misalignment
+#: variant of ``gyro_bias``), and ``none`` for clean logs
 SUITE_EFFECTS: tuple[str, ...] = (
     NO_MISSING_EFFECT,
     "initial_momentum",
@@ -46,6 +47,7 @@ SUITE_EFFECTS: tuple[str, ...] = (
     "slosh",
     "delay",
     "external_torque",
+    "gyro_scale",
 )
 
 

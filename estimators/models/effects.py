@@ -127,8 +127,9 @@ class EffectTerm(ABC):
         """The term as :func:`parse_effects` reads it (its name, with options if any)."""
         return self.name
 
-    def starts(self) -> list[FloatArray]:
-        """Starting points (k_e,) for a local fit of this term from a fit without it (default: the nominal)."""
+    def starts(self, theta_base: FloatArray | None = None) -> list[FloatArray]:
+        """Starting points (k_e,) for a local fit of this term from a fit without it whose base parameters are
+        ``theta_base`` (k_base,) (default: the nominal)."""
         return [self.nominal.copy()]
 
     def from_truth(self, hidden: Mapping[str, Any]) -> FloatArray:
@@ -331,7 +332,7 @@ class Payload(EffectTerm):
         self.truth_fields = (("payload_params10", 10),)
         super().__init__(ranges.nominal, ranges.lower, ranges.upper)
 
-    def starts(self) -> list[FloatArray]:
+    def starts(self, theta_base: FloatArray | None = None) -> list[FloatArray]:
         """A light compact object at the last joint (a zero mass sits on the bound, where the rest has no effect)."""
         start = np.zeros(10)
         start[0] = 0.05 * self.upper[0]
@@ -429,8 +430,14 @@ class Slosh(EffectTerm):
         out[:, 0] = np.minimum(out[:, 0], self.liquid_of(np.atleast_2d(theta_base)))
         return out
 
-    def starts(self) -> list[FloatArray]:
-        return [np.array([0.1 * self.upper[0], f, 0.05]) for f in self.START_FREQUENCIES_HZ]
+    def starts(self, theta_base: FloatArray | None = None) -> list[FloatArray]:
+        """One per :attr:`START_FREQUENCIES_HZ`, with a tenth of the usable fuel sloshing, or half the liquid left
+        for ``theta_base`` if that is less: beyond the liquid left the prediction is flat in the mass, and a fit
+        started there cannot find its way back."""
+        mass = 0.1 * self.upper[0]
+        if theta_base is not None:
+            mass = min(mass, 0.5 * float(self.liquid_of(np.atleast_2d(theta_base))[0]))
+        return [np.array([mass, f, 0.05]) for f in self.START_FREQUENCIES_HZ]
 
     def momentum(
         self, twist: FloatArray, theta: FloatArray, tank_m: FloatArray, composite10: FloatArray, context: EffectContext
