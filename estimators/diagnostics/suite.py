@@ -51,21 +51,20 @@ SUITE_EFFECTS: tuple[str, ...] = (
 )
 
 
-def run_case(robot_name: str, effect: str, seed: int, duration_s: float = 60.0) -> dict[str, Any]:
-    """Simulate one log with ``effect`` hidden (``none``: clean), diagnose it, apply the verdict; one result row."""
+def simulate_case(robot_name: str, effect: str, seed: int, duration_s: float = 60.0) -> Any:
+    """The suite's log of ``effect`` (``none``: clean) and ``seed``: the simulated env after the window (its
+    ``measurement_log()``, ``truth()`` and ``hidden_effects``)."""
     from agents.excitation import FourierExcitation
     from estimators.evaluation import draw_settings
     from spaceid_gym.datasets import simulate_episode
     from spaceid_gym.effects import draw_effect
     from spaceid_gym.robots import load_robot
-    from spaceid_gym.sim.sensors import SensorModel
 
-    start = time.perf_counter()
     robot = load_robot(robot_name)
     setting = draw_settings(robot, 1, seed)[0]
     rng = np.random.default_rng([seed, 1])
     hidden = None if effect == NO_MISSING_EFFECT else draw_effect(effect, rng, robot, setting.fuel_consumed_kg)
-    env = simulate_episode(
+    return simulate_episode(
         robot,
         duration_s,
         setting.fuel_consumed_kg,
@@ -74,6 +73,15 @@ def run_case(robot_name: str, effect: str, seed: int, duration_s: float = 60.0) 
         seed=seed,
         hidden_effects=hidden,
     )
+
+
+def run_case(robot_name: str, effect: str, seed: int, duration_s: float = 60.0) -> dict[str, Any]:
+    """Simulate one log with ``effect`` hidden (``none``: clean), diagnose it, apply the verdict; one result row."""
+    from spaceid_gym.sim.sensors import SensorModel
+
+    start = time.perf_counter()
+    env = simulate_case(robot_name, effect, seed, duration_s)
+    robot = env.robot
     log, truth = env.measurement_log(), env.truth()
     noise = SensorModel().gyro_std_rad_s(env.control_period_s)
     model = IdentificationModel(robot, "fuel")
