@@ -26,13 +26,16 @@ import traceback
 from collections import Counter
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from estimators.diagnostics.diagnose import NO_MISSING_EFFECT, diagnose
 from estimators.diagnostics.workflow import ParameterErrors, apply_effect, parameter_errors
 from estimators.problem import IdentificationModel
+
+if TYPE_CHECKING:
+    from spaceid_gym.envs.free_floating import FreeFloatingIDEnv
 
 #: options of :class:`~agents.excitation.FourierExcitation` for the suite (see the module docstring)
 DIAGNOSTIC_EXCITATION: dict[str, Any] = {"base_frequency_hz": 0.05, "n_harmonics": 10}
@@ -51,7 +54,7 @@ SUITE_EFFECTS: tuple[str, ...] = (
 )
 
 
-def simulate_case(robot_name: str, effect: str, seed: int, duration_s: float = 60.0) -> Any:
+def simulate_case(robot_name: str, effect: str, seed: int, duration_s: float = 60.0) -> FreeFloatingIDEnv:
     """The suite's log of ``effect`` (``none``: clean) and ``seed``: the simulated env after the window (its
     ``measurement_log()``, ``truth()`` and ``hidden_effects``)."""
     from agents.excitation import FourierExcitation
