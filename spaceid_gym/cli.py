@@ -304,7 +304,14 @@ def _diagnose_or_report(args: argparse.Namespace) -> None:
 
 def _diagnose_suite(args: argparse.Namespace) -> int:
     """Runs the suite and writes it; exit code 1 (after writing) if the diagnosis of any log raised."""
-    from estimators.diagnostics.suite import DIAGNOSTIC_EXCITATION, SUITE_EFFECTS, failed_rows, run_suite, write_suite
+    from estimators.diagnostics.suite import (
+        DIAGNOSTIC_EXCITATION,
+        SUITE_EFFECTS,
+        code_version,
+        failed_rows,
+        run_suite,
+        write_suite,
+    )
 
     if args.jobs < 1 or args.seeds < 1:
         raise SpaceIdInputError(f"--jobs and --seeds: expected at least 1, got {args.jobs} and {args.seeds}")
@@ -312,7 +319,7 @@ def _diagnose_suite(args: argparse.Namespace) -> int:
     unknown = [e for e in effects if e not in SUITE_EFFECTS]
     if unknown:
         raise SpaceIdInputError(f"--effects: unknown {unknown}; expected names from {', '.join(SUITE_EFFECTS)}")
-    start = time.perf_counter()
+    start, version = time.perf_counter(), code_version()  # the code that runs, read before it runs
     rows = run_suite(args.robot, effects, args.seeds, args.first_seed, args.jobs)
     info = {
         "robot": args.robot,
@@ -320,6 +327,7 @@ def _diagnose_suite(args: argparse.Namespace) -> int:
         "first_seed": args.first_seed,
         "effects": list(effects),
         "excitation": DIAGNOSTIC_EXCITATION,
+        "code_version": version,
         "wall_time_s": time.perf_counter() - start,
     }
     paths = write_suite(args.out, rows, info)

@@ -15,7 +15,9 @@ from estimators.diagnostics.diagnose import (
     ChannelWeights,
     ModelFit,
     _score,
+    _scored,
     _verdict,
+    candidate_model,
     diagnose,
     explained_fraction,
     fit_model,
@@ -187,6 +189,19 @@ def test_a_significant_effect_is_named_when_the_baseline_is_at_the_noise_in_aggr
     assert scale.significant and scale.explained_fraction == 1.0
     verdict, reason = _verdict(baseline, [scale], analysis=None, alpha=0.01)  # type: ignore[arg-type]
     assert verdict == "gyro_scale", reason
+
+
+def test_a_fit_with_more_slosh_than_liquid_is_implausible(short_fuel_episode) -> None:
+    """``diagnose`` judges a slosh fit against the liquid its own base parameters leave in the tank."""
+    ep = short_fuel_episode
+    model = candidate_model(IdentificationModel(ep.robot, "fuel"), "slosh")
+    problem = model.problem(ep.log)
+    usable = problem.parameters.terms[-1].upper[0]
+    base = np.array([usable - 20.0, 0.25, -0.2, 0.1])
+    over = _scored(problem, np.concatenate((base, [60.0, 0.4, 0.05])), model, "slosh", (None, 0), 0.0)
+    within = _scored(problem, np.concatenate((base, [15.0, 0.4, 0.05])), model, "slosh", (None, 0), 0.0)
+    assert any("exceeds the 20 kg of liquid left" in r for r in over.implausible), over.implausible
+    assert within.plausible
 
 
 def test_parameter_errors_use_the_bound_at_the_truth(paper6: Robot, short_fuel_episode) -> None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -28,7 +29,9 @@ def _fake_case(robot_name: str, effect: str, seed: int, duration_s: float = 60.0
     return _row(effect, seed)
 
 
-def test_a_failing_log_is_recorded_and_the_command_fails(monkeypatch: pytest.MonkeyPatch, tmp_path, capsys) -> None:
+def test_a_failing_log_is_recorded_and_the_command_fails(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     monkeypatch.setattr(suite, "run_case", _fake_case)
     code = main(["diagnose-suite", "--seeds", "3", "--effects", "slosh", "--out", str(tmp_path)])
     assert code == 1
@@ -43,9 +46,11 @@ def test_a_failing_log_is_recorded_and_the_command_fails(monkeypatch: pytest.Mon
     assert summary["logs"] == 3 and summary["verdicts"] == {"slosh": 2, "error": 1}
     assert summary["correct_percent"] == pytest.approx(200.0 / 3.0)
     assert summary["rms_over_noise_before_mean"] == pytest.approx(1.5)  # from the diagnosed logs only
+    info = json.loads((tmp_path / "summary.json").read_text())["info"]
+    assert info["code_version"] == suite.code_version() and info["code_version"] != ""
 
 
-def test_a_suite_without_failures_exits_zero(monkeypatch: pytest.MonkeyPatch, tmp_path) -> None:
+def test_a_suite_without_failures_exits_zero(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     monkeypatch.setattr(suite, "run_case", lambda robot, effect, seed, duration_s=60.0: _row(effect, seed))
     assert main(["diagnose-suite", "--seeds", "2", "--effects", "none,delay", "--out", str(tmp_path)]) == 0
     assert "| delay | 2 | 100 % |" in (tmp_path / "table.md").read_text()

@@ -28,7 +28,7 @@ For a model (robot, parameterisation, effects already in it) and a log, :func:`d
    that one is significantly better by its own likelihood-ratio test, at ``alpha`` divided by the number of
    such containers compared, see :func:`_prefer_nesting`), if it
    explains at least :data:`EXPLAINED_FRACTION` of the baseline's excess over the noise
-   (``X_baseline - (n - k)``); ``"none"`` when no candidate is significant and the baseline residual is
+   (``X_baseline - (n - k)``, :func:`explained_fraction`); ``"none"`` when no candidate is significant and the baseline residual is
    white (:func:`~estimators.diagnostics.residuals.analyse_residuals`); ``"unexplained"`` otherwise, with
    the residual structure described (dominant frequencies, correlated inputs, where in time).
 

@@ -143,6 +143,25 @@ def run_suite(
         return [f.result() for f in tqdm(futures, desc="diagnose suite", unit="log")]
 
 
+def code_version() -> str:
+    """``git describe --always --dirty`` of the source tree the suite runs from, or ``"unknown"`` outside a git checkout
+    (recorded in ``summary.json`` so each figure names the code that measured it)."""
+    import subprocess
+
+    try:
+        done = subprocess.run(
+            ["git", "describe", "--always", "--dirty"],
+            cwd=Path(__file__).resolve().parent,
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=False,
+        )
+    except (OSError, subprocess.TimeoutExpired):
+        return "unknown"
+    return done.stdout.strip() if done.returncode == 0 and done.stdout.strip() else "unknown"
+
+
 #: the verdict of a log whose diagnosis raised
 ERROR_VERDICT = "error"
 

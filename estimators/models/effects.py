@@ -472,7 +472,7 @@ class Slosh(EffectTerm):
             reasons.append("slosh mass is zero")
         if theta_base is not None:
             liquid = float(self.liquid_of(np.atleast_2d(theta_base))[0])
-            if theta[0] > liquid:
+            if theta[0] > liquid + 1e-6 * self.upper[0]:  # not for a fit on the cap by rounding
                 reasons.append(f"slosh mass {theta[0]:.4g} kg exceeds the {liquid:.4g} kg of liquid left in the tank")
         return reasons
 
