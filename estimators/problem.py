@@ -26,9 +26,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from estimators.estimate import Estimate
-from estimators.models.effects import USABLE_FUEL_FRACTION, EffectContext, EffectPrediction, Slosh, make_terms, parse_effects
+from estimators.models.effects import EffectContext, EffectPrediction, make_terms, parse_effects
 from estimators.models.momentum_model import MomentumModel, Samples
 from estimators.parameters import FuelParameters, Parameterisation, WithEffects, make_parameterisation
+from spaceid_gym.effects import remaining_liquid_kg
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.information import cramer_rao_std
 from spaceid_gym.log import MeasurementLog
@@ -90,7 +91,7 @@ def _parameterisation(
         return params if isinstance(params, Parameterisation) else make_parameterisation(params, robot, **options)
     bounds = {k: np.asarray(options.pop(k), dtype=float) for k in ("lower", "upper") if k in options}
     base = params if isinstance(params, Parameterisation) else make_parameterisation(params, robot, **options)
-    terms = make_terms(effects, robot, *_slosh_locators(base))
+    terms = make_terms(effects, robot, *_slosh_locators(base, robot))
     n_total = base.n_params + sum(t.n_params for t in terms)
     for key, value in bounds.items():
         if value.shape != (n_total,):
@@ -99,7 +100,7 @@ def _parameterisation(
             )
     if bounds and not isinstance(params, Parameterisation):
         base = make_parameterisation(params, robot, **options, **{k: v[: base.n_params] for k, v in bounds.items()})
-        terms = make_terms(effects, robot, *_slosh_locators(base))
+        terms = make_terms(effects, robot, *_slosh_locators(base, robot))
     offset = base.n_params
     for term in terms:
         part = slice(offset, offset + term.n_params)
@@ -125,21 +126,21 @@ def identifiability(
 
 
 def _slosh_locators(
-    base: Parameterisation,
+    base: Parameterisation, robot: Robot
 ) -> tuple[Callable[[FloatArray], FloatArray] | None, Callable[[FloatArray], FloatArray] | None]:
     """Where a slosh mass sits (P, 3) and how much liquid is left to slosh (P,) kg, for ``theta_base`` (P, k_base):
-    with the fuel parameters, the tank (full-tank CoM + bf) and the usable fuel minus the fuel consumed (at least 0);
-    else ``(None, None)`` (the term's defaults: the full-tank CoM and the usable fuel)."""
+    with the fuel parameters, the tank (full-tank CoM + bf) and the usable fuel minus the fuel consumed
+    (:func:`~spaceid_gym.effects.remaining_liquid_kg`, as in the simulator); else ``(None, None)`` (the term's
+    defaults: the full-tank CoM and the usable fuel)."""
     if not isinstance(base, FuelParameters):
         return None, None
     full_com = np.asarray(base.base_full.com_m, dtype=float)
-    usable_kg = USABLE_FUEL_FRACTION * base.base_full.mass_kg
 
     def tank(theta_base: FloatArray) -> FloatArray:
         return full_com + np.asarray(theta_base, dtype=float)[:, 1:4]
 
     def liquid(theta_base: FloatArray) -> FloatArray:
-        return np.maximum(usable_kg - np.asarray(theta_base, dtype=float)[:, 0], 0.0)
+        return np.asarray(remaining_liquid_kg(robot, np.asarray(theta_base, dtype=float)[:, 0]))
 
     return tank, liquid
 
@@ -222,14 +223,7 @@ class IdentificationProblem:
         params = self.parameters
         assert isinstance(params, WithEffects) and self._effects is not None
         base10, payload10 = params.composite(theta)
-        parts = params.term_parts(theta)
-        tank = np.zeros((len(theta), 3))
-        slosh = next((t for t in params.terms if isinstance(t, Slosh)), None)
-        if slosh is not None:
-            theta_base = params.base_part(theta)
-            tank = np.ascontiguousarray(slosh.tank_of(theta_base), dtype=float)
-            parts[slosh] = slosh.moving_part(parts[slosh], theta_base)
-        return self._effects.predict(base10, payload10, parts, tank, samples)
+        return self._effects.predict(base10, payload10, params.term_parts(theta), params.base_part(theta), samples)
 
     def cost(self, theta: FloatArray, samples: Samples = slice(None), count: bool = True) -> FloatArray:
         """Mean squared residual (rad/s)^2 over ``samples`` and the 3 axes, for ``theta`` (P, k): (P,)."""

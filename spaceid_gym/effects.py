@@ -296,9 +296,11 @@ def _random_rotation(rng: np.random.Generator) -> FloatArray:
     )
 
 
-def remaining_liquid_kg(robot: Robot, fuel_consumed_kg: float) -> float:
-    """Usable fuel still in the tank (kg): ``FuelSchedule().usable_fraction`` of the full-tank base mass minus the fuel consumed."""
-    return max(FuelSchedule().usable_fraction * robot.base_full.mass_kg - float(fuel_consumed_kg), 0.0)
+def remaining_liquid_kg(robot: Robot, fuel_consumed_kg: float | NDArray[np.float64]) -> float | NDArray[np.float64]:
+    """Usable fuel still in the tank (kg): ``FuelSchedule().usable_fraction`` of the full-tank base mass minus the fuel
+    consumed, at least 0; for one value (a float) or many (an array of the same shape)."""
+    left = FuelSchedule().usable_fraction * robot.base_full.mass_kg - np.asarray(fuel_consumed_kg, dtype=float)
+    return np.maximum(left, 0.0) if left.ndim else max(float(left), 0.0)
 
 
 def draw_effect(

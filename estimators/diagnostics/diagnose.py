@@ -305,6 +305,7 @@ def _joint_residuals(
 
 
 def _joint_chi2(problem: IdentificationProblem, channel: AttitudeChannel, weights: ChannelWeights, theta: FloatArray) -> float:
+    """The chi-square of both channels at ``theta`` (k,): what :func:`_joint_fit` minimises."""
     r = _joint_residuals(problem, channel, weights, theta)
     return float(r @ r)
 

@@ -50,11 +50,9 @@ from spaceid_gym.log import MeasurementLog
 from spaceid_gym.physics.inertia import RigidBodyInertia, skew, spatial_inertia_matrix
 from spaceid_gym.robots import Robot
 from spaceid_gym.sim.lie import matrix_from_quat, so3_exp
+from spaceid_gym.sim.mission import FuelSchedule
 
 FloatArray = NDArray[np.float64]
-
-#: the usable fuel of the default mission, as a fraction of the full-tank base mass (:class:`~spaceid_gym.sim.mission.FuelSchedule`)
-USABLE_FUEL_FRACTION = 0.25
 
 
 @dataclass(frozen=True)
@@ -418,7 +416,7 @@ class Slosh(EffectTerm):
         tank_of: Callable[[FloatArray], FloatArray] | None = None,
         liquid_of: Callable[[FloatArray], FloatArray] | None = None,
     ) -> None:
-        liquid_max_kg = USABLE_FUEL_FRACTION * robot.base_full.mass_kg
+        liquid_max_kg = FuelSchedule().usable_fraction * robot.base_full.mass_kg
         super().__init__(np.array([0.0, 0.3, 0.05]), np.array([0.0, 0.05, 0.005]), np.array([liquid_max_kg, 2.0, 1.0]))
         full_com = np.asarray(robot.base_full.com_m, dtype=float)
         self.tank_of = tank_of if tank_of is not None else (lambda theta_base: np.broadcast_to(full_com, (len(theta_base), 3)))
@@ -671,11 +669,12 @@ class EffectPrediction:
         base10: FloatArray,
         payload10: FloatArray | None,
         effect_thetas: dict[EffectTerm, FloatArray],
-        tank_m: FloatArray,
+        theta_base: FloatArray,
         samples: slice | NDArray[np.intp],
     ) -> tuple[FloatArray, FloatArray]:
-        """For composite parameters and each term's ``theta`` (P, k_e): the base's own rate (base body frame) and
-        what the gyro reads (after the measurement effects), each (P, T', 3), rad/s."""
+        """For composite parameters, each term's ``theta`` (P, k_e) and the base parameterisation's unknowns
+        ``theta_base`` (P, k_base) (they place a slosh mass and bound it by the liquid left): the base's own rate
+        (base body frame) and what the gyro reads (after the measurement effects), each (P, T', 3), rad/s."""
         span = slice(None) if self.needs_whole_log else samples
         n_p = base10.shape[0]
         extra = None
@@ -686,7 +685,9 @@ class EffectPrediction:
         if self.slosh is None:
             twist = self.momentum_model.predict_twist(base10, payload10, extra, span)
         else:
-            theta_slosh = effect_thetas[self.slosh]
+            # only the liquid left can slosh (Slosh.moving_part); the mass sits at the tank of these base parameters
+            theta_slosh = self.slosh.moving_part(effect_thetas[self.slosh], theta_base)
+            tank_m = np.ascontiguousarray(self.slosh.tank_of(theta_base), dtype=float)
             # the slosh is driven by the motion of the rest of the robot (the slosh mass not attached)
             rest10 = base10 - _point_mass10(theta_slosh[:, 0], tank_m)
             rest_twist = self.momentum_model.predict_twist(rest10, payload10, extra, span)
