@@ -43,12 +43,12 @@ above the likelihood optimum on average (3.2 with excess costs) and the RMS erro
 1.3-1.5 to 2.2-2.6 Cramér-Rao std.
 
 **Not in the paper: ``quadratic``** (off by default, so ``improved-pso`` is the paper's method).
-Each generation, a second-order model is fitted to the last ``K`` generations' evaluations (a
+Each generation, a second-order model is fitted to the last ``K`` generations (more when a small swarm needs them)' evaluations (a
 gradient per subset, one shared curvature: :mod:`estimators.quadratic_step`) and its minimum,
 within the region the fitted points cover, is checked on the whole log (one counted evaluation);
 it replaces the incumbent if better. It does not move the swarm. It is the quadratic
 approximation of qPSO, with the subset structure of the sequential evaluation built into the
-model. Measured on the 200 ``spaceid evaluate`` settings (README), it brings the median window to
+model. Measured on the 200 ``spaceid evaluate`` settings (README), it brings the median window closer to
 the optimum, but not the windows where the swarm stops part-way along the flat valley of a
 nearly empty tank.
 
@@ -95,6 +95,9 @@ from spaceid_gym.errors import SpaceIdInputError
 
 #: whole-log evaluations per generation of the default swarm (particles per subset)
 PARTICLES_PER_EVALUATION = 40
+
+#: one generation's evaluations: unit-box positions (N, k), subsets (N,), raw costs on them (N,) (rad/s)^2
+Evaluations = tuple[FloatArray, IntArray, FloatArray]
 
 
 class SubsetCosts:
@@ -254,7 +257,7 @@ class ImprovedPSO(SwarmEstimator):
         """Particles reset each time: ``max(1, round(Kre N))``."""
         return max(1, round(self.reset_fraction * self.n_particles))
 
-    def resets_after(self, generation: int) -> None:
+    def resets_after(self, generation: int) -> bool:
         """Whether the worst particles are reset after ``generation`` (every ``reset_period``, not after the last)."""
         return self.reset and generation % self.reset_period == 0 and generation < self.n_generations
 
@@ -281,7 +284,7 @@ class ImprovedPSO(SwarmEstimator):
         best_subset = np.zeros(n, dtype=np.intp)
         history: list[float] = []
         n_resets = 0
-        recent: deque[tuple[FloatArray, IntArray, FloatArray]] = deque(maxlen=split.n_subsets)
+        recent: deque[Evaluations] = deque(maxlen=self._quadratic_window(split.n_subsets, problem.n_params))
         for generation in range(1, n_generations + 1):
             assignment = (ranks + generation) % split.n_subsets
             raw = problem.cost_on_subsets(params.from_unit(unit), assignment, split.subsets)
@@ -355,25 +358,41 @@ class ImprovedPSO(SwarmEstimator):
         if leader_new and not np.array_equal(best_unit[leader], best.unit):
             best_raw[leader] = best.reference[best_subset[leader]] + (whole[0] - best.cost)  # exact, not a lucky draw
 
-    def _check_quadratic(self, best: _Incumbent, recent: deque[tuple[FloatArray, IntArray, FloatArray]]) -> None:
+    def _per_subset_fit(self, n_subsets: int, n_params: int) -> int:
+        """Evaluations per subset that the quadratic step fits (``POINTS_PER_COEFFICIENT`` x its coefficients in all)."""
+        return -(-POINTS_PER_COEFFICIENT * n_coefficients(n_params, n_subsets) // n_subsets)
+
+    def _quadratic_window(self, n_subsets: int, n_params: int) -> int:
+        """Generations of evaluations kept for the quadratic step: ``K`` x enough rounds for its points.
+
+        Over ``K`` generations every subset gets ``N`` evaluations (each particle visits each subset
+        once); without ``sequential`` (``K = 1``) a small swarm needs more than one generation.
+        """
+        return n_subsets * max(1, -(-self._per_subset_fit(n_subsets, n_params) // self.n_particles))
+
+    def _check_quadratic(self, best: _Incumbent, recent: deque[Evaluations]) -> None:
         """Whole-log check (counted) of the minimum of a quadratic fitted to the recent evaluations; may replace ``best``.
 
-        ``recent``: the last ``K`` generations' ``(unit (N, k), subset (N,), raw cost (N,))``. From
-        each subset, its lowest-excess evaluations are fitted, ``POINTS_PER_COEFFICIENT`` x the
-        model's coefficients in all (:func:`estimators.quadratic_step.quadratic_step`, around the
-        incumbent); nothing is evaluated when the fit gives no step.
+        ``recent``: the last generations' ``(unit (N, k), subset (N,), raw cost (N,))``
+        (:meth:`_quadratic_window` of them). From each subset, its lowest-excess evaluations are
+        fitted (:meth:`_per_subset_fit`; :func:`estimators.quadratic_step.quadratic_step`, around
+        the incumbent); nothing is evaluated when the fit gives no step or a zero one.
         """
         unit = np.concatenate([r[0] for r in recent])
         subset = np.concatenate([r[1] for r in recent])
         excess = self._comparable(np.concatenate([r[2] for r in recent]), subset, best.reference)
-        n_subsets = best.split.n_subsets
-        per_subset = -(-POINTS_PER_COEFFICIENT * n_coefficients(unit.shape[1], n_subsets) // n_subsets)
-        chosen = np.concatenate(
-            [np.flatnonzero(subset == s)[np.argsort(excess[subset == s], kind="stable")[:per_subset]] for s in range(n_subsets)]
-        )
-        step = quadratic_step(unit[chosen] - best.unit, subset[chosen], excess[chosen], best.split.weights)
-        if step is not None:
-            best.check(np.clip(best.unit + step, 0.0, 1.0)[None], [None])
+        per_subset = self._per_subset_fit(best.split.n_subsets, unit.shape[1])
+        chosen = []
+        for s in range(best.split.n_subsets):
+            on = np.flatnonzero(subset == s)
+            chosen.append(on[np.argsort(excess[on], kind="stable")[:per_subset]])
+        fitted = np.concatenate(chosen)
+        step = quadratic_step(unit[fitted] - best.unit, subset[fitted], excess[fitted], best.split.weights)
+        if step is None:
+            return
+        candidate = np.clip(best.unit + step, 0.0, 1.0)
+        if not np.array_equal(candidate, best.unit):
+            best.check(candidate[None], [None])
 
     def _reset(
         self,

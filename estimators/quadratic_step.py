@@ -22,10 +22,14 @@ sum, ``(sum_s w_s g_s) . d + 1/2 d' H d``, whose minimum is the step.
 
 **Conditioning.** The points of a converging swarm lie in a narrow, tilted valley (the fuel
 problem's Fisher information has condition numbers up to ~1e4 in the unit box), so the fit is
-made in coordinates whitened by the points' own second moment about ``x0``. The step is taken
-only if the fitted curvature is positive definite, and is limited to the region the points cover
-(a step no longer than the farthest fitted point, in the whitened coordinates): a quadratic is
-not extrapolated.
+made in coordinates whitened by the points' own second moment about ``x0``. The step is the
+minimum of the fitted model within the region the points cover (no longer than the farthest
+fitted point, in the whitened coordinates: a quadratic is not extrapolated); where the fitted
+curvature is not positive definite that is a point on the region's boundary. Either way it is
+only a candidate, which the caller evaluates.
+
+The shared curvature holds for *interleaved* subsets (each sees the whole excitation). For
+contiguous blocks of a log the curvatures differ, and the step is only as good as their mean.
 """
 
 from __future__ import annotations
@@ -40,6 +44,8 @@ IntArray = NDArray[np.intp]
 POINTS_PER_COEFFICIENT = 3
 #: directions whose spread of points is below this fraction of the largest one's variance are not fitted
 SPREAD_TOLERANCE = 1e-12
+#: relative size below which an eigenvalue counts as the lowest one, and a gradient component as zero
+HARD_CASE_TOLERANCE = 1e-12
 
 
 def n_coefficients(n_params: int, n_subsets: int) -> int:
@@ -57,12 +63,16 @@ def quadratic_step(offsets: FloatArray, subset: IntArray, excess: FloatArray, we
         excess: (m,) each point's cost on its subset minus the reference's cost on that subset.
         weights: (K,) each subset's share of the whole log's samples (sums to 1).
 
-    Directions in which the points do not spread (all on a face of the search box, say) are left
-    out of the fit and of the step. Returns ``None`` when there are fewer points than
-    ``POINTS_PER_COEFFICIENT`` times the coefficients or the model cannot be fitted (rank-deficient).
+    Directions in which neither the points nor the reference differ (all on a face of the search
+    box that the reference is on, say) are left out of the fit and of the step. Returns ``None``
+    when there are fewer points than ``POINTS_PER_COEFFICIENT`` times the coefficients, when the
+    model cannot be fitted (rank-deficient: a subset without points, or points on a face the
+    reference is not on), or when the data are not finite.
     """
     m = len(offsets)
     n_subsets = len(weights)
+    if not (np.all(np.isfinite(offsets)) and np.all(np.isfinite(excess))):
+        return None
     variances, axes = np.linalg.eigh(offsets.T @ offsets / m)
     spread = variances > SPREAD_TOLERANCE * max(float(variances[-1]), np.finfo(float).tiny)
     scale = axes[:, spread] * np.sqrt(variances[spread])  # offsets ~ z @ scale.T, z whitened (m, k')
@@ -90,10 +100,12 @@ def quadratic_step(offsets: FloatArray, subset: IntArray, excess: FloatArray, we
 def trust_region_minimum(gradient: FloatArray, curvature: FloatArray, radius: float) -> FloatArray:
     """Minimiser (k,) of ``g . z + 1/2 z' H z`` over ``|z| <= radius`` (the trust-region subproblem).
 
-    The Newton step when ``H`` is positive definite and the step fits; otherwise the boundary
-    solution ``z(lam) = -(H + lam I)^-1 g``, ``lam > max(0, -lambda_min(H))``, with ``lam`` found by
-    bisection on ``|z(lam)| = radius`` (in the "hard case", ``g`` orthogonal to the lowest
-    eigenvector, this stops short of the boundary: a shorter step, still a descent step).
+    The Newton step when ``H`` is positive definite and the step fits. Otherwise the minimiser is
+    on the boundary: ``z(lam) = -(H + lam I)^-1 g`` with ``lam > max(0, -lambda_min(H))`` found by
+    bisection on ``|z(lam)| = radius``; in the "hard case" (``g`` without a component along the
+    lowest eigenvector ``v``, so ``|z(lam)|`` stays below ``radius`` however close ``lam`` comes to
+    ``-lambda_min``) it is ``z(-lambda_min) + tau v`` with ``tau`` taking it to the boundary
+    (Moré and Sorensen, "Computing a trust region step", 1983).
     """
     values, vectors = np.linalg.eigh(curvature)
     g = vectors.T @ gradient
@@ -101,11 +113,18 @@ def trust_region_minimum(gradient: FloatArray, curvature: FloatArray, radius: fl
         newton = -g / values
         if np.linalg.norm(newton) <= radius:
             return vectors @ newton
-    low = max(0.0, -float(values[0]))
-    high = low + float(np.linalg.norm(g)) / radius + 1e-300
+    shift = max(0.0, -float(values[0]))
+    lowest = values + shift <= HARD_CASE_TOLERANCE * max(float(np.abs(values).max()), np.finfo(float).tiny)
+    if np.all(np.abs(g[lowest]) <= HARD_CASE_TOLERANCE * max(float(np.linalg.norm(g)), np.finfo(float).tiny)):
+        z = np.zeros_like(g)
+        z[~lowest] = -g[~lowest] / (values[~lowest] + shift)
+        if np.linalg.norm(z) <= radius:  # the hard case: the rest of the way along the lowest eigenvector
+            z[np.flatnonzero(lowest)[0]] = np.sqrt(radius**2 - float(z @ z))
+            return vectors @ z
+    low, high = shift, shift + float(np.linalg.norm(g)) / radius  # |z(high)| <= radius
     for _ in range(200):
         lam = 0.5 * (low + high)
-        if lam <= low or lam >= high:
+        if not low < lam < high:
             break
         if np.linalg.norm(g / (values + lam)) > radius:
             low = lam

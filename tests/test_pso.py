@@ -11,6 +11,7 @@ from scipy.optimize import least_squares
 from estimators.improved_pso import ImprovedPSO, SubsetCosts
 from estimators.problem import IdentificationModel, IdentificationProblem
 from estimators.pso import ParticleSwarm
+from estimators.quadratic_step import quadratic_step
 from estimators.registry import make_estimator
 from estimators.swarm import SwarmEstimator, nearest, nearest_best, ring_best
 from spaceid_gym.errors import SpaceIdInputError
@@ -307,3 +308,21 @@ def test_quadratic_step_lands_closer_to_the_optimum_for_one_evaluation_per_gener
     step_gap = np.mean([_delta_chi2(problem, e.theta, ml_theta) for e in with_step])
     assert step_gap < 0.5 * plain_gap
     assert step_gap < 1.0  # within one Cramér-Rao std of the ML estimate on average
+
+
+def test_quadratic_step_is_tried_without_sequential_evaluation(problem: IdentificationProblem, monkeypatch: Any) -> None:
+    """With one subset a 40-particle generation is fewer points than the model needs: the window holds two."""
+    import estimators.improved_pso as improved
+
+    steps: list[bool] = []
+
+    def counted(*args: Any) -> Any:
+        step = quadratic_step(*args)
+        steps.append(step is not None)
+        return step
+
+    monkeypatch.setattr(improved, "quadratic_step", counted)
+    swarm = ImprovedPSO(sequential=False, quadratic=True, n_generations=10, seed=0)
+    assert swarm._quadratic_window(1, problem.n_params) == 2  # 42 points from 40 particles
+    swarm.fit_problem(problem)
+    assert len(steps) == 10 and sum(steps) >= 8  # the first generation alone is too few points

@@ -100,3 +100,19 @@ def test_trust_region_minimum_matches_a_constrained_optimiser(seed: int) -> None
     )
     assert np.linalg.norm(z) <= radius * (1 + 1e-9)
     assert model(z) <= best.fun + 1e-7 * max(1.0, abs(best.fun))
+
+
+def test_trust_region_hard_case_goes_to_the_boundary_along_the_lowest_eigenvector() -> None:
+    """Gradient without a component along the negative-curvature direction: ``|z(lam)|`` never reaches the radius."""
+    curvature = np.diag([-1.0, 2.0])
+    z = trust_region_minimum(np.array([0.0, 1.0]), curvature, 10.0)
+    np.testing.assert_allclose(z, [np.sqrt(100.0 - 1.0 / 9.0), -1.0 / 3.0], rtol=1e-12)  # model -50.17
+    np.testing.assert_allclose(np.abs(trust_region_minimum(np.zeros(2), curvature, 1.0)), [1.0, 0.0], atol=1e-15)
+
+
+def test_non_finite_costs_give_no_step() -> None:
+    rng = np.random.default_rng(4)
+    offsets = rng.standard_normal((60, 2))
+    excess = np.einsum("ij,ij->i", offsets, offsets)
+    excess[7] = np.nan
+    assert quadratic_step(offsets, np.zeros(60, dtype=np.intp), excess, np.ones(1)) is None
