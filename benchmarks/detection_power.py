@@ -5,7 +5,7 @@
 For each of the diagnosis suite's logs of ``--effect`` (same simulation, seeds and default magnitude as
 ``spaceid diagnose-suite``), the Fisher information of the candidate model (the ``fuel`` unknowns plus the
 effect's) at the true parameters, for the documented gyro noise and, as in ``diagnose``, the star
-tracker's channel (5 arcsec). With the fuel unknowns free, the likelihood ratio of the effect is
+tracker's channel (its simulated 5 arcsec). With the fuel unknowns free, the likelihood ratio of the effect is
 non-central chi-square with ``k_e`` degrees of freedom and non-centrality ``lambda = e^T S e`` (``e`` the
 true effect, ``S`` the Schur complement of the effect's block: the information left once the fuel
 unknowns have absorbed what they can). Its power against ``diagnose``'s threshold (``alpha = 0.01``,
@@ -20,19 +20,21 @@ Prints ``lambda`` and the power per log, the mean power, the median ``lambda``, 
 from __future__ import annotations
 
 import argparse
+import inspect
 
 import numpy as np
 from scipy.optimize import brentq
 from scipy.stats import chi2, ncx2
 
-from estimators.diagnostics.diagnose import DEFAULT_CANDIDATES, candidate_model
+from estimators.diagnostics.diagnose import DEFAULT_CANDIDATES, candidate_model, diagnose
 from estimators.diagnostics.suite import SUITE_EFFECTS, simulate_case
 from estimators.models.attitude_channel import AttitudeChannel
 from estimators.problem import IdentificationModel
 from spaceid_gym.sim.sensors import SensorModel
 
-ALPHA = 0.01
-STAR_TRACKER_STD_RAD = 5.0 / 3600.0 * np.pi / 180.0
+#: ``diagnose``'s significance level, and the simulated sensors (gyro, star tracker) of the suite's logs
+ALPHA: float = inspect.signature(diagnose).parameters["alpha"].default
+SENSORS = SensorModel()
 
 
 def non_centrality(effect: str, seed: int, robot: str = "paper6") -> float:
@@ -44,10 +46,10 @@ def non_centrality(effect: str, seed: int, robot: str = "paper6") -> float:
     term = problem.parameters.terms[-1]
     effect_true = term.from_truth(truth["hidden_effects"])
     theta = np.concatenate(([truth["fuel_consumed_kg"]], truth["tank_position_m"], effect_true))
-    fisher = problem.fisher(theta, SensorModel().gyro_std_rad_s(env.control_period_s))
+    fisher = problem.fisher(theta, SENSORS.gyro_std_rad_s(env.control_period_s))
     channel = AttitudeChannel.of(model, log)
     if channel is not None:
-        fisher = fisher + channel.fisher(theta, STAR_TRACKER_STD_RAD)
+        fisher = fisher + channel.fisher(theta, SENSORS.attitude_noise_rad)
     k = problem.parameters.n_params - term.n_params
     schur = fisher[k:, k:] - fisher[k:, :k] @ np.linalg.solve(fisher[:k, :k], fisher[:k, k:])
     return float(effect_true @ schur @ effect_true)

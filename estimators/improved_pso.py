@@ -288,7 +288,8 @@ class ImprovedPSO(SwarmEstimator):
         for generation in range(1, n_generations + 1):
             assignment = (ranks + generation) % split.n_subsets
             raw = problem.cost_on_subsets(params.from_unit(unit), assignment, split.subsets)
-            recent.append((unit.copy(), assignment, raw))
+            if self.quadratic:
+                recent.append((unit.copy(), assignment, raw))
             better = self._comparable(raw, assignment, best.reference) < self._comparable(best_raw, best_subset, best.reference)
             best_unit[better], best_raw[better], best_subset[better] = unit[better], raw[better], assignment[better]
 

@@ -45,12 +45,12 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from spaceid_gym.effects import remaining_liquid_kg
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.log import MeasurementLog
 from spaceid_gym.physics.inertia import RigidBodyInertia, skew, spatial_inertia_matrix
 from spaceid_gym.robots import Robot
 from spaceid_gym.sim.lie import matrix_from_quat, so3_exp
-from spaceid_gym.sim.mission import FuelSchedule
 
 FloatArray = NDArray[np.float64]
 
@@ -416,7 +416,7 @@ class Slosh(EffectTerm):
         tank_of: Callable[[FloatArray], FloatArray] | None = None,
         liquid_of: Callable[[FloatArray], FloatArray] | None = None,
     ) -> None:
-        liquid_max_kg = FuelSchedule().usable_fraction * robot.base_full.mass_kg
+        liquid_max_kg = float(remaining_liquid_kg(robot, 0.0))  # the usable fuel, as the simulator has it
         super().__init__(np.array([0.0, 0.3, 0.05]), np.array([0.0, 0.05, 0.005]), np.array([liquid_max_kg, 2.0, 1.0]))
         full_com = np.asarray(robot.base_full.com_m, dtype=float)
         self.tank_of = tank_of if tank_of is not None else (lambda theta_base: np.broadcast_to(full_com, (len(theta_base), 3)))
