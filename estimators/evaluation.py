@@ -81,9 +81,21 @@ def draw_settings(robot: Robot, n_settings: int, seed: int, schedule: FuelSchedu
     return out
 
 
+def _split_outside_brackets(text: str) -> list[str]:
+    """``text`` split at the commas not inside ``[...]`` (any depth), each part stripped, empty parts dropped."""
+    parts, depth, start = [], 0, 0
+    for i, char in enumerate(text):
+        depth += {"[": 1, "]": -1}.get(char, 0)
+        if char == "," and depth == 0:
+            parts.append(text[start:i])
+            start = i + 1
+    parts.append(text[start:])
+    return [p.strip() for p in parts if p.strip()]
+
+
 def parse_estimator_specs(text: str) -> list[str]:
     """Split ``"improved-pso,pso[topology=ring,n_particles=20],lm"`` at the commas outside brackets."""
-    specs = [s.strip() for s in re.split(r",(?![^\[]*\])", text) if s.strip()]
+    specs = _split_outside_brackets(text)
     if not specs:
         raise SpaceIdInputError("estimators: expected a comma-separated list of estimator names")
     return specs
@@ -91,12 +103,13 @@ def parse_estimator_specs(text: str) -> list[str]:
 
 def estimator_from_spec(spec: str, **overrides: Any) -> Estimator:
     """``name[key=value,...]`` -> the registered estimator with those options (values parsed as JSON where
-    possible); ``overrides`` (e.g. ``seed``, ``max_evaluations``) replace options of the same name."""
+    possible, so ``inertia=[0.9,0.4]`` is a pair); ``overrides`` (e.g. ``seed``, ``max_evaluations``) replace
+    options of the same name."""
     match = re.fullmatch(r"\s*([\w.-]+)\s*(?:\[(.*)\])?\s*", spec)
     if match is None:
         raise SpaceIdInputError(f"estimator spec {spec!r}: expected name or name[key=value,...]")
     options: dict[str, Any] = {}
-    for item in filter(None, (s.strip() for s in (match.group(2) or "").split(","))):
+    for item in _split_outside_brackets(match.group(2) or ""):
         key, sep, raw = item.partition("=")
         if not sep:
             raise SpaceIdInputError(f"estimator spec {spec!r}: option {item!r} is not key=value")

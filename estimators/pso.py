@@ -14,7 +14,15 @@ import numpy as np
 from estimators.base import SearchResult
 from estimators.options import check_float, check_int
 from estimators.problem import IdentificationProblem
-from estimators.swarm import Inertia, SwarmEstimator, global_best, inertia_at, ring_best
+from estimators.swarm import (
+    DEFAULT_INERTIA,
+    DEFAULT_MAX_VELOCITY,
+    Inertia,
+    SwarmEstimator,
+    global_best,
+    inertia_at,
+    ring_best,
+)
 from spaceid_gym.errors import SpaceIdInputError
 
 
@@ -27,9 +35,9 @@ class ParticleSwarm(SwarmEstimator):
         topology: ``"global"`` (every particle follows the swarm's best: fast, collapses early) or
             ``"ring"`` (the best of itself and ``ring_neighbours`` index neighbours each side: slower, more diverse).
         ring_neighbours: neighbours each side on the ring (default 1; ring topology only).
-        inertia: ``w``, constant or ``(start, end)`` decreased linearly (default ``(0.9, 0.4)``).
-        c1, c2: cognitive and social weights (default 2.0 each, with the decreasing inertia).
-        max_velocity: velocity limit, box widths per generation (default 0.2).
+        inertia: ``w``, constant or ``(start, end)`` decreased linearly (default ``(0.7, 0.3)``, :mod:`estimators.swarm`).
+        c1, c2: cognitive and social weights (default 2.0 each).
+        max_velocity: velocity limit, box widths per generation (default 0.15).
         max_evaluations: budget in whole-log evaluations; sets ``n_generations = floor(max_evaluations / n_particles)``.
         seed: the generator's seed.
 
@@ -46,10 +54,10 @@ class ParticleSwarm(SwarmEstimator):
         n_generations: int = 50,
         topology: str = "global",
         ring_neighbours: int = 1,
-        inertia: Inertia = (0.9, 0.4),
+        inertia: Inertia = DEFAULT_INERTIA,
         c1: float = 2.0,
         c2: float = 2.0,
-        max_velocity: float = 0.2,
+        max_velocity: float = DEFAULT_MAX_VELOCITY,
         max_evaluations: float | None = None,
         seed: int | None = 0,
     ) -> None:

@@ -11,6 +11,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
+from estimators.evaluation import estimator_from_spec, parse_estimator_specs
 from spaceid_gym.cli import main
 from spaceid_gym.errors import SpaceIdInputError
 
@@ -110,6 +111,19 @@ def test_evaluate_writes_tables_and_plots(tmp_path: Path) -> None:
     rows = {(r["estimator"], r["quantity"]): r for r in summary["summary"]}
     assert rows[("lm", "M")]["n_settings"] == 2 and rows[("lm", "M")]["rms_over_bound"] > 0
     assert "| lm |" in (out / "table.md").read_text()
+
+
+def test_estimator_specs_split_at_the_commas_outside_brackets() -> None:
+    """A list-valued option (an inertia schedule) stays one option; each spec builds its estimator."""
+    specs = parse_estimator_specs("improved-pso, pso[topology=ring,inertia=[0.9,0.4]] ,lm")
+    assert specs == ["improved-pso", "pso[topology=ring,inertia=[0.9,0.4]]", "lm"]
+    swarm = estimator_from_spec(specs[1], seed=5)
+    assert swarm.get_params()["inertia"] == (0.9, 0.4)
+    assert swarm.get_params()["topology"] == "ring" and swarm.seed == 5
+    with pytest.raises(SpaceIdInputError, match="not key=value"):
+        estimator_from_spec("pso[inertia]")
+    with pytest.raises(SpaceIdInputError, match="expected a comma-separated list"):
+        parse_estimator_specs(" , ")
 
 
 def test_env_runs_the_estimator_at_the_window_end() -> None:
