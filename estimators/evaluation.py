@@ -81,21 +81,29 @@ def draw_settings(robot: Robot, n_settings: int, seed: int, schedule: FuelSchedu
     return out
 
 
-def _split_outside_brackets(text: str) -> list[str]:
-    """``text`` split at the commas not inside ``[...]`` (any depth), each part stripped, empty parts dropped."""
-    parts, depth, start = [], 0, 0
+def _split_outside_brackets(text: str, what: str) -> list[str]:
+    """``text`` split at the commas not inside ``[...]`` (any depth), each part stripped, empty parts dropped.
+
+    Unbalanced brackets raise :class:`SpaceIdInputError` naming ``what`` (the list or spec being read).
+    """
+    parts: list[str] = []
+    depth, start = 0, 0
     for i, char in enumerate(text):
         depth += {"[": 1, "]": -1}.get(char, 0)
+        if depth < 0:
+            raise SpaceIdInputError(f"{what}: unbalanced ']' at character {i + 1} of {text!r}")
         if char == "," and depth == 0:
             parts.append(text[start:i])
             start = i + 1
+    if depth:
+        raise SpaceIdInputError(f"{what}: unclosed '[' in {text!r}")
     parts.append(text[start:])
     return [p.strip() for p in parts if p.strip()]
 
 
 def parse_estimator_specs(text: str) -> list[str]:
     """Split ``"improved-pso,pso[topology=ring,n_particles=20],lm"`` at the commas outside brackets."""
-    specs = _split_outside_brackets(text)
+    specs = _split_outside_brackets(text, "estimators")
     if not specs:
         raise SpaceIdInputError("estimators: expected a comma-separated list of estimator names")
     return specs
@@ -109,10 +117,10 @@ def estimator_from_spec(spec: str, **overrides: Any) -> Estimator:
     if match is None:
         raise SpaceIdInputError(f"estimator spec {spec!r}: expected name or name[key=value,...]")
     options: dict[str, Any] = {}
-    for item in _split_outside_brackets(match.group(2) or ""):
+    for item in _split_outside_brackets(match.group(2) or "", f"estimator spec {spec!r}"):
         key, sep, raw = item.partition("=")
         if not sep:
-            raise SpaceIdInputError(f"estimator spec {spec!r}: option {item!r} is not key=value")
+            raise SpaceIdInputError(f"estimator spec {spec!r}: option {item!r} is not key=value (list values: key=[a,b])")
         try:
             options[key.strip()] = json.loads(raw.strip())
         except json.JSONDecodeError:

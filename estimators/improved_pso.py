@@ -37,15 +37,16 @@ single lowest one is selected for; ``consensus=False`` drops it). The better rep
 if its whole-log cost is lower; the checked personal best's noisy excess is replaced by its exact
 whole-log one. Stored personal bests keep their raw cost and subset, so a new reference re-bases
 them exactly (``excess = raw - c_s(x_ref)``); as the swarm closes in on the reference the remaining
-subset noise (the ``e_s`` cross term, proportional to ``|x - x_ref|``) shrinks with it. It matters:
+subset noise (the ``e_s`` cross term, proportional to ``|x - x_ref|``) shrinks with it. It matters
+(measured with the earlier defaults, Shi and Eberhart's inertia, K = 5, no quadratic step):
 on 40 simulated episodes (3 seeds each), ranking raw subset costs instead ends 8.4 chi-square units
 above the likelihood optimum on average (3.2 with excess costs) and the RMS errors grow from
 1.3-1.5 to 2.2-2.6 Cramér-Rao std.
 
 **Not in the paper: ``quadratic``** (on by default; ``quadratic=False`` is the paper's method
-alone). Each generation, a second-order model is fitted to the last ``K`` generations' evaluations
-(more when a small swarm needs them: a gradient per subset, one shared curvature,
-:mod:`estimators.quadratic_step`) and its minimum, within the region the fitted points cover, is
+alone). Each generation, a second-order model (a gradient per subset, one shared curvature:
+:mod:`estimators.quadratic_step`) is fitted to the last ``K`` generations' evaluations (more
+generations when a small swarm needs them) and its minimum, within the region the fitted points cover, is
 checked on the whole log (one counted evaluation); it replaces the incumbent if better. It does not
 move the swarm. It is the quadratic approximation of qPSO, with the subset structure of the
 sequential evaluation built into the model. The swarm brings the points close to the optimum, the
@@ -59,7 +60,7 @@ generation (known exactly, no extra evaluation).
 Swarm size: ``n_particles=None`` takes ``PARTICLES_PER_EVALUATION x n_subsets`` particles with
 ``sequential`` (``PARTICLES_PER_EVALUATION`` without), so a generation costs about
 ``PARTICLES_PER_EVALUATION`` whole-log evaluations either way and the ablations run at the same
-budget (about 2100 whole-log evaluations for G = 50). 40 particles per evaluation keeps a fit on a
+budget (about 2150 whole-log evaluations for G = 50 with the quadratic step, 2100 without). 40 particles per evaluation keeps a fit on a
 60 s, 50 Hz log under 0.5 s. The number of subsets K = 3 (120 particles) was chosen with the
 defaults of :mod:`estimators.swarm` on settings disjoint from the README's evaluation
 (``benchmarks/swarm_tuning.py``): on the 100 seed-1 settings K = 3 ended closer to the optimum than
@@ -82,6 +83,8 @@ from estimators.options import check_bool, check_float, check_int
 from estimators.problem import IdentificationProblem
 from estimators.quadratic_step import POINTS_PER_COEFFICIENT, n_coefficients, quadratic_step
 from estimators.swarm import (
+    DEFAULT_C1,
+    DEFAULT_C2,
     DEFAULT_INERTIA,
     DEFAULT_MAX_VELOCITY,
     FloatArray,
@@ -184,7 +187,7 @@ class ImprovedPSO(SwarmEstimator):
         consensus: also check the mean of the ``Nnb(G)`` best personal bests on the whole log each generation.
         quadratic: also check the minimum of a quadratic fitted to the recent evaluations each
             generation (not in the paper; default on, ``False`` for the paper's method alone).
-        inertia, c1, c2, max_velocity: the eq.-16 update (defaults ``(0.7, 0.3)``, 2.0, 2.0, 0.15), see :mod:`estimators.swarm`.
+        inertia, c1, c2, max_velocity: the eq.-16 update (defaults: the ``DEFAULT_*`` of :mod:`estimators.swarm`).
         seed: the generator's seed.
 
     ``extra`` of the estimate: ``n_particles_used``, ``n_subsets_used``, ``n_whole_log_evaluations``
@@ -210,8 +213,8 @@ class ImprovedPSO(SwarmEstimator):
         consensus: bool = True,
         quadratic: bool = True,
         inertia: Inertia = DEFAULT_INERTIA,
-        c1: float = 2.0,
-        c2: float = 2.0,
+        c1: float = DEFAULT_C1,
+        c2: float = DEFAULT_C2,
         max_velocity: float = DEFAULT_MAX_VELOCITY,
         seed: int | None = 0,
     ) -> None:

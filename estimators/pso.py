@@ -15,6 +15,8 @@ from estimators.base import SearchResult
 from estimators.options import check_float, check_int
 from estimators.problem import IdentificationProblem
 from estimators.swarm import (
+    DEFAULT_C1,
+    DEFAULT_C2,
     DEFAULT_INERTIA,
     DEFAULT_MAX_VELOCITY,
     Inertia,
@@ -35,9 +37,9 @@ class ParticleSwarm(SwarmEstimator):
         topology: ``"global"`` (every particle follows the swarm's best: fast, collapses early) or
             ``"ring"`` (the best of itself and ``ring_neighbours`` index neighbours each side: slower, more diverse).
         ring_neighbours: neighbours each side on the ring (default 1; ring topology only).
-        inertia: ``w``, constant or ``(start, end)`` decreased linearly (default ``(0.7, 0.3)``, :mod:`estimators.swarm`).
-        c1, c2: cognitive and social weights (default 2.0 each).
-        max_velocity: velocity limit, box widths per generation (default 0.15).
+        inertia: ``w``, constant or ``(start, end)`` decreased linearly (default ``DEFAULT_INERTIA`` of :mod:`estimators.swarm`).
+        c1, c2: cognitive and social weights (default ``DEFAULT_C1``, ``DEFAULT_C2``).
+        max_velocity: velocity limit, box widths per generation (default ``DEFAULT_MAX_VELOCITY``).
         max_evaluations: budget in whole-log evaluations; sets ``n_generations = floor(max_evaluations / n_particles)``.
         seed: the generator's seed.
 
@@ -55,8 +57,8 @@ class ParticleSwarm(SwarmEstimator):
         topology: str = "global",
         ring_neighbours: int = 1,
         inertia: Inertia = DEFAULT_INERTIA,
-        c1: float = 2.0,
-        c2: float = 2.0,
+        c1: float = DEFAULT_C1,
+        c2: float = DEFAULT_C2,
         max_velocity: float = DEFAULT_MAX_VELOCITY,
         max_evaluations: float | None = None,
         seed: int | None = 0,

@@ -12,12 +12,15 @@ bound it crossed and that velocity component is zeroed (it does not keep pushing
 Inertia: a constant ``w`` or a pair ``(w_start, w_end)`` decreased linearly over the generations:
 large steps while the swarm explores, small ones when it refines. The paper gives no values for
 ``w``, ``c1``, ``c2`` or the velocity limit. The defaults, shared by both swarms, are
-``DEFAULT_INERTIA = (0.7, 0.3)``, ``c1 = c2 = 2`` and ``DEFAULT_MAX_VELOCITY = 0.15``, chosen by
-measurement on settings disjoint from the README's evaluation (``benchmarks/swarm_tuning.py``,
-settings seeds 1 and 2; the README's table uses seed 0). With Shi and Eberhart's ``(0.9, 0.4)`` and
-a limit of 0.2 box widths the swarm explores for longer than G = 50 generations allow: on the 200
-seed-2 settings the improved PSO alone then ends on average 3.5 chi-square units above the
-likelihood optimum (with its earlier K = 5 subsets), against 2.0 with these defaults and K = 3.
+``DEFAULT_INERTIA = (0.7, 0.3)``, ``DEFAULT_C1 = DEFAULT_C2 = 2`` and ``DEFAULT_MAX_VELOCITY = 0.15``,
+chosen for the improved PSO by measurement on settings disjoint from the README's evaluation
+(``benchmarks/swarm_tuning.py``; the README's table uses settings seed 0): a grid of limits
+(0.075-0.2) and schedules on the 100 settings of seed 1, then the choice among the three best
+candidates on the 200 of seed 2. Classic PSO inherits them without being tuned itself. With Shi and
+Eberhart's ``(0.9, 0.4)`` and a limit of 0.2 box widths the swarm explores for longer than G = 50
+generations allow: on the 200 seed-2 settings the improved PSO alone then ends on average 3.5
+chi-square units above the likelihood optimum (with its earlier K = 5 subsets), against 2.0 with
+these defaults and K = 3.
 
 Neighbourhood bests (``nbest``) are indices into the personal bests; three topologies are given
 here: global best, a ring of ``r`` neighbours each side (by particle index) and the ``n`` nearest
@@ -40,9 +43,12 @@ IntArray = NDArray[np.intp]
 Inertia = float | tuple[float, float]
 
 #: default inertia schedule ``(w_start, w_end)`` of both swarms (see the module docstring)
-DEFAULT_INERTIA: Inertia = (0.7, 0.3)
+DEFAULT_INERTIA: tuple[float, float] = (0.7, 0.3)
 #: default velocity limit, box widths per generation (see the module docstring)
-DEFAULT_MAX_VELOCITY = 0.15
+DEFAULT_MAX_VELOCITY: float = 0.15
+#: default cognitive and social weights ``c1``, ``c2`` of the eq.-16 update
+DEFAULT_C1: float = 2.0
+DEFAULT_C2: float = 2.0
 
 
 def check_inertia(value: Any) -> Inertia:

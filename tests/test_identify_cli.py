@@ -124,6 +124,12 @@ def test_estimator_specs_split_at_the_commas_outside_brackets() -> None:
         estimator_from_spec("pso[inertia]")
     with pytest.raises(SpaceIdInputError, match="expected a comma-separated list"):
         parse_estimator_specs(" , ")
+    with pytest.raises(SpaceIdInputError, match="unbalanced"):
+        parse_estimator_specs("pso[c1=2],inertia=0.5],lm")
+    with pytest.raises(SpaceIdInputError, match="unclosed"):
+        parse_estimator_specs("pso[inertia=[0.9,0.4],lm")
+    with pytest.raises(SpaceIdInputError, match="unbalanced"):
+        estimator_from_spec("pso[inertia=[0.9,0.4]]]")
 
 
 def test_env_runs_the_estimator_at_the_window_end() -> None:
