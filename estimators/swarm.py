@@ -18,7 +18,8 @@ chosen for the improved PSO by measurement on settings disjoint from the README'
 (0.075-0.2) and schedules on the 100 settings of seed 1, then the choice among the three best
 candidates on the 200 of seed 2. Classic PSO inherits them without being tuned itself. With Shi and
 Eberhart's ``(0.9, 0.4)`` and a limit of 0.2 box widths the swarm explores for longer than G = 50
-generations allow: on the 200 seed-2 settings the improved PSO alone then ends on average 3.5
+generations allow: on the 200 seed-2 settings the improved PSO without the quadratic step (and without
+following its incumbent) then ends on average 3.5
 chi-square units above the likelihood optimum (with its earlier K = 5 subsets), against 2.0 with
 these defaults and K = 3.
 

@@ -105,6 +105,7 @@ def test_options_round_trip_with_the_resolved_swarm_size() -> None:
         (ImprovedPSO, {"consensus": None}, "consensus"),
         (ImprovedPSO, {"follow_fraction": -0.1}, "follow_fraction"),
         (ImprovedPSO, {"follow_fraction": 1.0}, "follow_fraction"),
+        (ImprovedPSO, {"n_particles": 3, "follow_fraction": 0.9, "reset": False}, "follow_fraction"),
         (ImprovedPSO, {"n_particles": 2, "reset_fraction": 0.9}, "reset_fraction"),
     ],
 )
@@ -375,22 +376,47 @@ def test_follow_puts_the_worst_on_the_incumbent_and_scatters_the_next_as_far_as_
     incumbent = _Moved(np.full(k, 0.5), np.array([0.2, 0.3, 0.4]))
     moved_from = np.array([0.5, 0.5, 0.5, 0.5 - 0.02])  # it moved 0.02
     order = np.argsort(-(best_raw - incumbent.reference[best_subset]), kind="stable")
-    before = unit.copy()
+    before, best_before, raw_before = unit.copy(), best_unit.copy(), best_raw.copy()
     swarm._follow(rng, incumbent, moved_from, unit, velocity, best_unit, best_raw, best_subset)  # type: ignore[arg-type]
 
-    assert swarm.n_follow == 4 and order[0] == 7
+    assert swarm.n_follow == 4
     np.testing.assert_array_equal(unit[7], incumbent.unit)
     np.testing.assert_array_equal(best_unit[7], incumbent.unit)
     assert best_raw[7] == incumbent.reference[best_subset[7]]  # its excess is exactly 0: known, not evaluated
     around = order[1:4]
     assert np.all(np.isinf(best_raw[around]))  # evaluated in the next generation
     np.testing.assert_array_equal(best_unit[around], unit[around])
-    assert np.all(np.linalg.norm(unit[around] - 0.5, axis=1) < 5 * 0.02)
+    distance = np.linalg.norm(unit[around] - 0.5, axis=1)
+    assert np.all(distance > 1e-4) and np.all(distance < 5 * 0.02)  # scattered, as far as it moved
     assert np.all(velocity[order[:4]] == 0.0)
     rest = order[4:]
     np.testing.assert_array_equal(unit[rest], before[rest])
     np.testing.assert_array_equal(velocity[rest], 0.05)
+    np.testing.assert_array_equal(best_unit[rest], best_before[rest])
+    np.testing.assert_array_equal(best_raw[rest], raw_before[rest])
     assert ImprovedPSO(follow_fraction=0.0).n_follow == 0 and ImprovedPSO(n_particles=5, follow_fraction=0.01).n_follow == 1
+
+
+def test_follow_runs_exactly_in_the_generations_where_the_incumbent_moved(
+    problem: IdentificationProblem, monkeypatch: Any
+) -> None:
+    calls: list[bool] = []
+    follow = ImprovedPSO._follow
+
+    def spy(self: ImprovedPSO, rng: Any, best: Any, moved_from: np.ndarray, *arrays: Any) -> None:
+        calls.append(not np.array_equal(moved_from, best.unit))
+        follow(self, rng, best, moved_from, *arrays)
+
+    monkeypatch.setattr(ImprovedPSO, "_follow", spy)
+    history = np.array(ImprovedPSO(n_generations=20, seed=0).fit_problem(problem).cost_history)
+    nominal = float(problem.cost(problem.parameters.nominal[None], count=False)[0])
+    # the incumbent moves in generation g exactly when its cost drops; none after the last generation (g = 20)
+    previous = np.r_[nominal, history[:18]]
+    moved = history[:19] < previous * (1.0 - 1e-12)
+    assert all(calls) and len(calls) == int(moved.sum()) > 0
+    calls.clear()
+    ImprovedPSO(n_generations=20, seed=0, follow_fraction=0.0).fit_problem(problem)
+    assert calls == []  # switched off
 
 
 def test_following_the_incumbent_lands_closer_to_the_optimum(problem: IdentificationProblem, ml_theta: np.ndarray) -> None:
