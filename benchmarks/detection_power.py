@@ -1,9 +1,9 @@
 """How often can ``diagnose`` name a hidden effect at all? Expected power of its likelihood-ratio test.
 
-    python benchmarks/detection_power.py [--effect gyro_scale] [--seeds 20] [--first-seed 0]
+    python benchmarks/detection_power.py [--effect gyro_scale] [--magnitude SIZE] [--seeds 20] [--first-seed 0]
 
-For each of the diagnosis suite's logs of ``--effect`` (same simulation, seeds and default magnitude as
-``spaceid diagnose-suite``), the Fisher information of the candidate model (the ``fuel`` unknowns plus the
+For each of the diagnosis suite's logs of ``--effect`` (same simulation, seeds and magnitude as
+``spaceid diagnose-suite``: the default, or ``--magnitude`` as its ``--magnitude effect=SIZE``), the Fisher information of the candidate model (the ``fuel`` unknowns plus the
 effect's) at the true parameters, for the documented gyro noise and, as in ``diagnose``, the star
 tracker's channel (its simulated 5 arcsec). With the fuel unknowns free, the likelihood ratio of the effect is
 non-central chi-square with ``k_e`` degrees of freedom and non-centrality ``lambda = e^T S e`` (``e`` the
@@ -37,9 +37,9 @@ ALPHA: float = inspect.signature(diagnose).parameters["alpha"].default
 SENSORS = SensorModel()
 
 
-def non_centrality(effect: str, seed: int, robot: str = "paper6") -> float:
-    """``lambda`` of the effect's likelihood ratio on the suite's log of ``effect`` and ``seed``."""
-    env = simulate_case(robot, effect, seed)
+def non_centrality(effect: str, seed: int, robot: str = "paper6", magnitude: float | None = None) -> float:
+    """``lambda`` of the effect's likelihood ratio on the suite's log of ``effect``, ``seed`` and ``magnitude`` (None: default)."""
+    env = simulate_case(robot, effect, seed, magnitude=magnitude)
     log, truth = env.measurement_log(), env.truth()
     model = candidate_model(IdentificationModel(env.robot, "fuel"), effect)
     problem = model.problem(log)
@@ -58,22 +58,25 @@ def non_centrality(effect: str, seed: int, robot: str = "paper6") -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--effect", default="gyro_scale", choices=[e for e in SUITE_EFFECTS if e != "none"])
+    parser.add_argument("--magnitude", type=float, default=None, help="the effect's size (default: its default)")
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--first-seed", type=int, default=0)
     args = parser.parse_args()
     if args.seeds < 1:
         parser.error(f"--seeds: expected at least 1, got {args.seeds}")
+    if args.magnitude is not None and not (np.isfinite(args.magnitude) and args.magnitude > 0):
+        parser.error(f"--magnitude: expected a finite size > 0, got {args.magnitude}")
     dof = candidate_model(IdentificationModel("paper6", "fuel"), args.effect).parameters.terms[-1].n_params
     threshold = chi2.isf(ALPHA / len(DEFAULT_CANDIDATES), dof)
     powers, lambdas = [], []
     for seed in range(args.first_seed, args.first_seed + args.seeds):
-        lam = non_centrality(args.effect, seed)
+        lam = non_centrality(args.effect, seed, magnitude=args.magnitude)
         lambdas.append(lam)
         powers.append(ncx2.sf(threshold, dof, lam))
         print(f"seed {seed:3d}: lambda {lam:9.1f}  power {powers[-1]:.2f}", flush=True)
     needed = brentq(lambda x: ncx2.sf(threshold, dof, x) - 0.9, 1e-3, 1e4)
     print(
-        f"{args.effect}: mean expected power of the test {np.mean(powers):.2f} over {len(powers)} logs; median lambda "
+        f"{args.effect} (magnitude {'default' if args.magnitude is None else f'{args.magnitude:g}'}): mean expected power of the test {np.mean(powers):.2f} over {len(powers)} logs; median lambda "
         f"{np.median(lambdas):.1f} against the threshold {threshold:.1f} "
         f"({dof} dof, alpha {ALPHA} / {len(DEFAULT_CANDIDATES)} candidates); 90 % power needs lambda {needed:.1f}"
     )

@@ -129,6 +129,11 @@ def _parser() -> argparse.ArgumentParser:
     suite.add_argument("--seeds", type=int, default=20, help="logs per effect (default 20)")
     suite.add_argument("--first-seed", type=int, default=0)
     suite.add_argument("--effects", default=None, help="comma-separated hidden effects, 'none' for clean logs (default: all)")
+    suite.add_argument(
+        "--magnitude",
+        default=None,
+        help="sizes other than the defaults, e.g. 'gyro_scale=2.6e-3' (units: spaceid_gym.effects); same seeds, same directions",
+    )
     suite.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
     suite.add_argument("--out", type=Path, required=True, help="output folder")
 
@@ -309,6 +314,7 @@ def _diagnose_suite(args: argparse.Namespace) -> int:
         SUITE_EFFECTS,
         code_version,
         failed_rows,
+        parse_magnitudes,
         run_suite,
         write_suite,
     )
@@ -319,13 +325,15 @@ def _diagnose_suite(args: argparse.Namespace) -> int:
     unknown = [e for e in effects if e not in SUITE_EFFECTS]
     if unknown:
         raise SpaceIdInputError(f"--effects: unknown {unknown}; expected names from {', '.join(SUITE_EFFECTS)}")
+    magnitudes = parse_magnitudes(args.magnitude, effects)
     start, version = time.perf_counter(), code_version()  # the code that runs, read before it runs
-    rows = run_suite(args.robot, effects, args.seeds, args.first_seed, args.jobs)
+    rows = run_suite(args.robot, effects, args.seeds, args.first_seed, args.jobs, magnitudes=magnitudes)
     info = {
         "robot": args.robot,
         "seeds": args.seeds,
         "first_seed": args.first_seed,
         "effects": list(effects),
+        "magnitudes": magnitudes,
         "excitation": DIAGNOSTIC_EXCITATION,
         "code_version": version,
         "wall_time_s": time.perf_counter() - start,

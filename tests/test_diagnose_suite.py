@@ -23,7 +23,9 @@ def _row(effect: str, seed: int) -> dict[str, Any]:
     return row
 
 
-def _fake_case(robot_name: str, effect: str, seed: int, duration_s: float = 60.0) -> dict[str, Any]:
+def _fake_case(
+    robot_name: str, effect: str, seed: int, duration_s: float = 60.0, magnitude: float | None = None
+) -> dict[str, Any]:
     if seed == 1:
         raise ZeroDivisionError("division by zero")
     return _row(effect, seed)
@@ -51,6 +53,60 @@ def test_a_failing_log_is_recorded_and_the_command_fails(
 
 
 def test_a_suite_without_failures_exits_zero(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
-    monkeypatch.setattr(suite, "run_case", lambda robot, effect, seed, duration_s=60.0: _row(effect, seed))
+    monkeypatch.setattr(suite, "run_case", lambda robot, effect, seed, duration_s=60.0, magnitude=None: _row(effect, seed))
     assert main(["diagnose-suite", "--seeds", "2", "--effects", "none,delay", "--out", str(tmp_path)]) == 0
     assert "| delay | 2 | 100 % |" in (tmp_path / "table.md").read_text()
+
+
+def test_magnitudes_reach_the_simulation_and_name_the_row(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    sizes: list[tuple[str, float | None]] = []
+
+    def fake(robot: str, effect: str, seed: int, duration_s: float = 60.0, magnitude: float | None = None) -> dict[str, Any]:
+        sizes.append((effect, magnitude))
+        return _row(effect, seed) | {"magnitude": "default" if magnitude is None else magnitude}
+
+    monkeypatch.setattr(suite, "run_case", fake)
+    args = ["diagnose-suite", "--seeds", "1", "--effects", "none,gyro_scale", "--magnitude", "gyro_scale=2.6e-3"]
+    assert main([*args, "--out", str(tmp_path)]) == 0
+    assert sizes == [("none", None), ("gyro_scale", 2.6e-3)]
+    table = (tmp_path / "table.md").read_text()
+    assert "| none | 1 | 100 % |" in table and "| gyro_scale (magnitude 0.0026) | 1 | 100 % |" in table
+    assert json.loads((tmp_path / "summary.json").read_text())["info"]["magnitudes"] == {"gyro_scale": 2.6e-3}
+
+
+@pytest.mark.parametrize(
+    ("text", "named"),
+    [
+        ("gyro_scale", "expected effect=size"),
+        ("none=1", "expected effect=size"),
+        ("slosh=3", "(gyro_scale)"),
+        ("gyro_scale=-1", "gyro_scale: expected a finite size > 0, got '-1'"),
+        ("gyro_scale=abc", "got 'abc'"),
+        ("gyro_scale=nan", "got 'nan'"),
+        ("gyro_scale=1e-3,gyro_scale=2e-3", "'gyro_scale' given twice"),
+    ],
+)
+def test_bad_magnitudes_are_refused_before_anything_runs(
+    text: str, named: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "never"
+    code = main(["diagnose-suite", "--seeds", "1", "--effects", "none,gyro_scale", "--magnitude", text, "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and "--magnitude" in err and named in err and "Traceback" not in err
+    assert not out.exists()
+
+
+def test_the_same_seed_draws_the_same_direction_at_any_magnitude() -> None:
+    """``--magnitude`` scales the suite's effect without changing its draw (the same logs otherwise)."""
+    import numpy as np
+
+    from spaceid_gym.effects import DEFAULT_MAGNITUDES, draw_effect
+    from spaceid_gym.robots import load_robot
+
+    robot = load_robot("paper6")
+    default, larger = (draw_effect("gyro_scale", np.random.default_rng([4, 1]), robot, 50.0, size) for size in (None, 2.6e-3))
+    np.testing.assert_allclose(
+        np.asarray(larger.gyro_scale_misalignment),
+        np.asarray(default.gyro_scale_misalignment) * 2.6e-3 / DEFAULT_MAGNITUDES["gyro_scale"],
+        rtol=1e-12,
+    )

@@ -33,6 +33,7 @@ import numpy as np
 from estimators.diagnostics.diagnose import NO_MISSING_EFFECT, diagnose
 from estimators.diagnostics.workflow import ParameterErrors, apply_effect, parameter_errors
 from estimators.problem import IdentificationModel
+from spaceid_gym.errors import SpaceIdInputError
 
 if TYPE_CHECKING:
     from spaceid_gym.envs.free_floating import FreeFloatingIDEnv
@@ -54,9 +55,12 @@ SUITE_EFFECTS: tuple[str, ...] = (
 )
 
 
-def simulate_case(robot_name: str, effect: str, seed: int, duration_s: float = 60.0) -> FreeFloatingIDEnv:
+def simulate_case(
+    robot_name: str, effect: str, seed: int, duration_s: float = 60.0, magnitude: float | None = None
+) -> FreeFloatingIDEnv:
     """The suite's log of ``effect`` (``none``: clean) and ``seed``: the simulated env after the window (its
-    ``measurement_log()``, ``truth()`` and ``hidden_effects``)."""
+    ``measurement_log()``, ``truth()`` and ``hidden_effects``). ``magnitude``: the effect's size in the unit of
+    :data:`spaceid_gym.effects.DEFAULT_MAGNITUDES` (``None``: the default); the direction drawn does not depend on it."""
     from agents.excitation import FourierExcitation
     from estimators.evaluation import draw_settings
     from spaceid_gym.datasets import simulate_episode
@@ -66,7 +70,7 @@ def simulate_case(robot_name: str, effect: str, seed: int, duration_s: float = 6
     robot = load_robot(robot_name)
     setting = draw_settings(robot, 1, seed)[0]
     rng = np.random.default_rng([seed, 1])
-    hidden = None if effect == NO_MISSING_EFFECT else draw_effect(effect, rng, robot, setting.fuel_consumed_kg)
+    hidden = None if effect == NO_MISSING_EFFECT else draw_effect(effect, rng, robot, setting.fuel_consumed_kg, magnitude)
     return simulate_episode(
         robot,
         duration_s,
@@ -78,12 +82,13 @@ def simulate_case(robot_name: str, effect: str, seed: int, duration_s: float = 6
     )
 
 
-def run_case(robot_name: str, effect: str, seed: int, duration_s: float = 60.0) -> dict[str, Any]:
-    """Simulate one log with ``effect`` hidden (``none``: clean), diagnose it, apply the verdict; one result row."""
+def run_case(robot_name: str, effect: str, seed: int, duration_s: float = 60.0, magnitude: float | None = None) -> dict[str, Any]:
+    """Simulate one log with ``effect`` hidden (``none``: clean; ``magnitude``: see :func:`simulate_case`),
+    diagnose it, apply the verdict; one result row."""
     from spaceid_gym.sim.sensors import SensorModel
 
     start = time.perf_counter()
-    env = simulate_case(robot_name, effect, seed, duration_s)
+    env = simulate_case(robot_name, effect, seed, duration_s, magnitude)
     robot = env.robot
     log, truth = env.measurement_log(), env.truth()
     noise = SensorModel().gyro_std_rad_s(env.control_period_s)
@@ -91,6 +96,7 @@ def run_case(robot_name: str, effect: str, seed: int, duration_s: float = 60.0) 
     diagnosis = diagnose(model, log)
     row: dict[str, Any] = {
         "effect": effect,
+        "magnitude": _magnitude_cell(magnitude),
         "seed": seed,
         "verdict": diagnosis.verdict,
         "correct": diagnosis.verdict == effect,
@@ -124,6 +130,36 @@ def _z_columns(errors: ParameterErrors | None, when: str) -> dict[str, float]:
     return out
 
 
+def _magnitude_cell(magnitude: float | None) -> float | str:
+    """The ``magnitude`` column: the size given, or ``"default"``."""
+    return "default" if magnitude is None else magnitude
+
+
+def parse_magnitudes(text: str | None, effects: tuple[str, ...]) -> dict[str, float]:
+    """``"gyro_scale=2.6e-3,payload=20"`` -> ``{"gyro_scale": 0.0026, "payload": 20.0}``, for effects of this run.
+
+    Raises:
+        SpaceIdInputError: a pair that is not ``name=number``, an effect not among ``effects`` (or ``none``),
+            an effect given twice, a size that is not a finite number > 0.
+    """
+    out: dict[str, float] = {}
+    for pair in [] if text is None else [p.strip() for p in text.split(",") if p.strip()]:
+        name, sep, value = (part.strip() for part in pair.partition("="))
+        if not sep or name == NO_MISSING_EFFECT or name not in effects:
+            allowed = ", ".join(e for e in effects if e != NO_MISSING_EFFECT)
+            raise SpaceIdInputError(f"--magnitude: expected effect=size for an effect of this run ({allowed}), got {pair!r}")
+        if name in out:
+            raise SpaceIdInputError(f"--magnitude: effect '{name}' given twice")
+        try:
+            size = float(value)
+        except ValueError:
+            size = math.nan
+        if not (math.isfinite(size) and size > 0.0):
+            raise SpaceIdInputError(f"--magnitude: {name}: expected a finite size > 0, got {value!r}")
+        out[name] = size
+    return out
+
+
 def run_suite(
     robot_name: str = "paper6",
     effects: tuple[str, ...] = SUITE_EFFECTS,
@@ -131,11 +167,16 @@ def run_suite(
     first_seed: int = 0,
     jobs: int = 1,
     duration_s: float = 60.0,
+    magnitudes: dict[str, float] | None = None,
 ) -> list[dict[str, Any]]:
-    """Every effect x ``seeds`` seeds; rows in a fixed order (effect, seed), whatever ``jobs``."""
+    """Every effect x ``seeds`` seeds; rows in a fixed order (effect, seed), whatever ``jobs``.
+
+    ``magnitudes``: sizes replacing some effects' defaults (:func:`parse_magnitudes`); the same seeds draw
+    the same directions and fuel states at any size."""
     from tqdm import tqdm
 
-    cases = [(robot_name, effect, first_seed + s, duration_s) for effect in effects for s in range(seeds)]
+    sizes = magnitudes or {}
+    cases = [(robot_name, effect, first_seed + s, duration_s, sizes.get(effect)) for effect in effects for s in range(seeds)]
     if jobs == 1:
         return [guarded_case(*case) for case in tqdm(cases, desc="diagnose suite", unit="log")]
     with ProcessPoolExecutor(max_workers=jobs) as pool:
@@ -166,16 +207,19 @@ def code_version() -> str:
 ERROR_VERDICT = "error"
 
 
-def guarded_case(robot_name: str, effect: str, seed: int, duration_s: float = 60.0) -> dict[str, Any]:
+def guarded_case(
+    robot_name: str, effect: str, seed: int, duration_s: float = 60.0, magnitude: float | None = None
+) -> dict[str, Any]:
     """:func:`run_case`, or, if it raises, a row with the verdict ``error`` and the exception and where it was
     raised in ``error`` (the suite goes on; :func:`failed_rows` lists these)."""
     try:
-        return run_case(robot_name, effect, seed, duration_s)
+        return run_case(robot_name, effect, seed, duration_s, magnitude)
     except Exception as exc:  # recorded in the row and reported by the command, not hidden
         frame = traceback.extract_tb(exc.__traceback__)[-1]
         where = f"{Path(frame.filename).name}:{frame.lineno} in {frame.name}"
         return {
             "effect": effect,
+            "magnitude": _magnitude_cell(magnitude),
             "seed": seed,
             "verdict": ERROR_VERDICT,
             "correct": False,
@@ -198,6 +242,7 @@ def summarise(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
         named = [r for r in group if r["correct"]]
         entry: dict[str, Any] = {
             "effect": effect,
+            "magnitude": every[0].get("magnitude", "default"),
             "logs": len(every),
             "correct_percent": 100.0 * len(named) / len(every),
             "verdicts": dict(Counter(r["verdict"] for r in every).most_common()),
@@ -216,6 +261,12 @@ def summarise(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return out
 
 
+def _effect_label(entry: dict[str, Any]) -> str:
+    """An effect's name in the table, with its size when it is not the default."""
+    size = entry.get("magnitude", "default")
+    return entry["effect"] if size == "default" else f"{entry['effect']} (magnitude {size:g})"
+
+
 def markdown_table(summary: list[dict[str, Any]]) -> str:
     """The summary as a Markdown table."""
     lines = [
@@ -228,7 +279,7 @@ def markdown_table(summary: list[dict[str, Any]]) -> str:
         z_after = ", ".join(f"{s[f'z_rms_{n}_after']:.2f}" for n in ("mdf", "bx", "by", "bz"))
         z_before = ", ".join(f"{s[f'z_rms_{n}_before']:.2f}" for n in ("mdf", "bx", "by", "bz"))
         lines.append(
-            f"| {s['effect']} | {s['logs']} | {s['correct_percent']:.0f} % | {verdicts} | {s['rms_over_noise_before_mean']:.3f} | "
+            f"| {_effect_label(s)} | {s['logs']} | {s['correct_percent']:.0f} % | {verdicts} | {s['rms_over_noise_before_mean']:.3f} | "
             f"{s['rms_over_noise_after_mean']:.3f} / {s['rms_over_noise_after_max']:.3f} | {z_after} | {z_before} | "
             f"{s['wall_time_s_mean']:.1f} |"
         )
