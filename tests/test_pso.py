@@ -359,6 +359,43 @@ def test_quadratic_step_is_tried_without_sequential_evaluation(problem: Identifi
     assert len(steps) == 10 and sum(steps) >= 8  # the first generation alone is too few points
 
 
+class _Valley:
+    """An incumbent stand-in for :meth:`ImprovedPSO._check_quadratic`: at 0.5 in a 2-D unit box, where only a
+    step of at most ``0.1`` up the first axis lowers the cost (a fitted step that overshoots a thin valley)."""
+
+    def __init__(self) -> None:
+        self.unit, self.cost, self.reference = np.full(2, 0.5), 1.0, np.zeros(3)
+        self.split = SubsetCosts.__new__(SubsetCosts)
+        self.split.subsets, self.split.weights = [np.arange(3)] * 3, np.full(3, 1.0 / 3.0)
+        self.tried: list[float] = []
+
+    def check(self, points: np.ndarray, known: list[Any]) -> np.ndarray:
+        length = float(np.linalg.norm(points[0] - self.unit))
+        self.tried.append(length)
+        if length <= 0.1 + 1e-12 and points[0][0] > self.unit[0]:
+            self.unit, self.cost = points[0].copy(), self.cost - 0.5
+        return np.array([self.cost])
+
+
+def test_quadratic_step_halves_its_trust_radius_after_a_miss_and_doubles_it_after_a_hit(monkeypatch: Any) -> None:
+    import estimators.improved_pso as improved
+
+    monkeypatch.setattr(improved, "quadratic_step", lambda *args: np.array([0.4, 0.0]))  # overshoots the valley
+    swarm, best = ImprovedPSO(n_particles=12), _Valley()
+    recent: Any = [(np.random.default_rng(0).random((12, 2)), np.arange(12) % 3, np.zeros(12))]
+    radii = [np.inf]
+    for _ in range(4):
+        radii.append(swarm._check_quadratic(best, recent, radii[-1]))  # type: ignore[arg-type]
+    np.testing.assert_allclose(best.tried, [0.4, 0.2, 0.1, 0.2])  # the whole step, then within the radius
+    np.testing.assert_allclose(radii[1:], [0.2, 0.1, 0.2, 0.1])  # miss, miss, hit (2 x 0.1), miss
+    np.testing.assert_allclose(best.unit, [0.6, 0.5])
+    monkeypatch.setattr(improved, "quadratic_step", lambda *args: np.array([0.05, 0.0]))  # within the radius: whole
+    assert swarm._check_quadratic(best, recent, 0.2) == pytest.approx(0.1)  # type: ignore[arg-type]
+    assert best.tried[-1] == pytest.approx(0.05)
+    monkeypatch.setattr(improved, "quadratic_step", lambda *args: np.array([-0.4, 0.0]))  # uphill at any length
+    assert swarm._check_quadratic(best, recent, improved.MIN_TRUST_RADIUS) == improved.MIN_TRUST_RADIUS  # type: ignore[arg-type]
+
+
 # ---------------------------------------------------------------------- not in the paper: following the incumbent
 class _Moved:
     """An incumbent stand-in for :meth:`ImprovedPSO._follow`: where it is and its cost on each subset."""
