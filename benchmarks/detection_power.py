@@ -27,9 +27,10 @@ from scipy.optimize import brentq
 from scipy.stats import chi2, ncx2
 
 from estimators.diagnostics.diagnose import DEFAULT_CANDIDATES, candidate_model, diagnose
-from estimators.diagnostics.suite import SUITE_EFFECTS, simulate_case
+from estimators.diagnostics.suite import SUITE_EFFECTS, check_magnitudes, parse_magnitudes, simulate_case
 from estimators.models.attitude_channel import AttitudeChannel
 from estimators.problem import IdentificationModel
+from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.sim.sensors import SensorModel
 
 #: ``diagnose``'s significance level, and the simulated sensors (gyro, star tracker) of the suite's logs
@@ -58,25 +59,29 @@ def non_centrality(effect: str, seed: int, robot: str = "paper6", magnitude: flo
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--effect", default="gyro_scale", choices=[e for e in SUITE_EFFECTS if e != "none"])
-    parser.add_argument("--magnitude", type=float, default=None, help="the effect's size (default: its default)")
+    parser.add_argument("--magnitude", default=None, help="the effect's size (units: spaceid_gym.effects.MAGNITUDE_UNITS)")
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--first-seed", type=int, default=0)
     args = parser.parse_args()
     if args.seeds < 1:
         parser.error(f"--seeds: expected at least 1, got {args.seeds}")
-    if args.magnitude is not None and not (np.isfinite(args.magnitude) and args.magnitude > 0):
-        parser.error(f"--magnitude: expected a finite size > 0, got {args.magnitude}")
+    try:
+        magnitude = parse_magnitudes(None if args.magnitude is None else f"{args.effect}={args.magnitude}", (args.effect,))
+        check_magnitudes("paper6", magnitude, range(args.first_seed, args.first_seed + args.seeds))
+    except SpaceIdInputError as exc:
+        parser.error(str(exc))
+    size = magnitude.get(args.effect)
     dof = candidate_model(IdentificationModel("paper6", "fuel"), args.effect).parameters.terms[-1].n_params
     threshold = chi2.isf(ALPHA / len(DEFAULT_CANDIDATES), dof)
     powers, lambdas = [], []
     for seed in range(args.first_seed, args.first_seed + args.seeds):
-        lam = non_centrality(args.effect, seed, magnitude=args.magnitude)
+        lam = non_centrality(args.effect, seed, magnitude=size)
         lambdas.append(lam)
         powers.append(ncx2.sf(threshold, dof, lam))
         print(f"seed {seed:3d}: lambda {lam:9.1f}  power {powers[-1]:.2f}", flush=True)
     needed = brentq(lambda x: ncx2.sf(threshold, dof, x) - 0.9, 1e-3, 1e4)
     print(
-        f"{args.effect} (magnitude {'default' if args.magnitude is None else f'{args.magnitude:g}'}): mean expected power of the test {np.mean(powers):.2f} over {len(powers)} logs; median lambda "
+        f"{args.effect} (magnitude {'default' if size is None else f'{size:g}'}): mean expected power of the test {np.mean(powers):.2f} over {len(powers)} logs; median lambda "
         f"{np.median(lambdas):.1f} against the threshold {threshold:.1f} "
         f"({dof} dof, alpha {ALPHA} / {len(DEFAULT_CANDIDATES)} candidates); 90 % power needs lambda {needed:.1f}"
     )

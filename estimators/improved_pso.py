@@ -55,12 +55,12 @@ above the likelihood optimum on average (3.2 with excess costs) and the RMS erro
   structure of the sequential evaluation built into the model. Fitting the points nearest the
   incumbent rather than the swarm's lowest anywhere matters where the swarm holds several clusters
   along a curved valley: a quadratic through all of them fits none. The trust radius (unit box,
-  unbounded at first) is halved after a step that did not lower the cost and set to twice the step
-  after one that did, as in trust-region methods (Conn, Gould and Toint, *Trust-Region Methods*, 2000,
-  ch. 6): in a thin curved valley the fitted step points along it (traced: within 14 degrees of the
-  direction to the optimum) but overshoots its floor, and without the radius the same overshooting
-  step was tried, and rejected, for the last 36 generations while the incumbent sat 10 chi-square
-  units up (setting 33 of seed 3).
+  unbounded at first) bounds the step's length; the next one is half the length of the step tried
+  when it did not lower the cost, twice it when it did (a simplified trust-region rule: Conn, Gould
+  and Toint, *Trust-Region Methods*, 2000, ch. 6, also weigh the decrease against the model's and
+  never shrink after a good step). In a thin curved valley the fitted step points along the valley
+  but overshoots its floor; without the radius the same rejected step came back generation after
+  generation (traced on setting 33 of seed 3, which ended 9.8 chi-square units up without it).
 * ``follow_fraction``: in a generation where the incumbent moved (a candidate check or the quadratic
   step), the worst ``round(follow_fraction N)`` particles (at least one) move to it: one onto it, the
   rest scattered round it as far as it moved (:meth:`ImprovedPSO._follow`). In a reset generation the
@@ -77,9 +77,9 @@ local fit and ``follow_fraction`` were found on the 200 settings of seed 3 (``fo
 converged too early: two windows ended in another basin, 144 and 188 chi-square units up, mean excess
 1.71, M 1.24x; ``--seed 3 --estimators "improved-pso[follow_fraction=0.2],improved-pso"``), then
 checked on seeds 1 and 2; the trust radius was found on the windows of seed 3 that ended furthest up
-(a radius that only scales the fitted step, with a floor of 1/8 of it, left setting 186 of seed 2
-45 units up: the fitted steps were 8 to 37 times the distance to the optimum), then checked on all of seeds
-3, 1 and 2. The README's evaluation uses seed 0:
+(a first form, a factor on the fitted step with a floor of 1/8, left one window of seed 2 far up, so
+the radius bounds the step's length instead), then checked on all of seeds 3, 1 and 2. The README's
+evaluation uses seed 0:
 
 =================================  =================  =================  =================
 settings                           seed 3 (200)       seed 2 (200)       seed 1 (100 / 200)

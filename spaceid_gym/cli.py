@@ -132,7 +132,8 @@ def _parser() -> argparse.ArgumentParser:
     suite.add_argument(
         "--magnitude",
         default=None,
-        help="sizes other than the defaults, e.g. 'gyro_scale=2.6e-3' (units: spaceid_gym.effects); same seeds, same directions",
+        help="sizes other than the defaults, e.g. 'gyro_scale=2.6e-3,payload=20' in the units of "
+        "spaceid_gym.effects.MAGNITUDE_UNITS (slosh: kg, at most the liquid left); same seeds, same directions",
     )
     suite.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
     suite.add_argument("--out", type=Path, required=True, help="output folder")
@@ -312,6 +313,7 @@ def _diagnose_suite(args: argparse.Namespace) -> int:
     from estimators.diagnostics.suite import (
         DIAGNOSTIC_EXCITATION,
         SUITE_EFFECTS,
+        check_magnitudes,
         code_version,
         failed_rows,
         parse_magnitudes,
@@ -326,6 +328,7 @@ def _diagnose_suite(args: argparse.Namespace) -> int:
     if unknown:
         raise SpaceIdInputError(f"--effects: unknown {unknown}; expected names from {', '.join(SUITE_EFFECTS)}")
     magnitudes = parse_magnitudes(args.magnitude, effects)
+    check_magnitudes(args.robot, magnitudes, range(args.first_seed, args.first_seed + args.seeds))
     start, version = time.perf_counter(), code_version()  # the code that runs, read before it runs
     rows = run_suite(args.robot, effects, args.seeds, args.first_seed, args.jobs, magnitudes=magnitudes)
     info = {

@@ -44,7 +44,11 @@ gyro_bias         ``|b|``, rad/s (10 deg/h    bias repeatability of an LN-200S-c
 gyro_scale        Frobenius norm of ``E``     FOG scale-factor stability ~100 ppm (LN-200-class
                   (1e-3)                      datasheets) plus an uncalibrated mounting misalignment of
                                               the gyro unit to the base of order 1 mrad (our assumption
-                                              for a mechanical alignment tolerance of ~0.05 deg).
+                                              for a mechanical alignment tolerance of ~0.05 deg). A
+                                              MEMS IMU of the STIM300 class (Safran Sensonor datasheet:
+                                              scale factor accuracy 500 ppm, misalignment 1 mrad) is up
+                                              to 2.6e-3 (500 ppm on the 3 diagonal entries, 1 mrad on
+                                              the 6 others).
 payload           mass, kg (10)               an orbital-replacement-unit-sized object of 5-20 kg: a
                                               uniform 0.3 x 0.2 x 0.2 m box, random orientation, CoM
                                               0.15 m from the last joint's origin in a random direction.
@@ -120,6 +124,18 @@ DEFAULT_MAGNITUDES: dict[str, float] = {
     "delay": 0.02,
     "external_torque": 5e-4,
     "gyro_scale": 1e-3,
+}
+
+#: the unit of each effect's ``magnitude`` argument ("" for the dimensionless Frobenius norm of ``gyro_scale``; a
+#: ``slosh`` magnitude is a mass, while its default is a fraction of the remaining liquid)
+MAGNITUDE_UNITS: dict[str, str] = {
+    "initial_momentum": "N m s",
+    "gyro_bias": "rad/s",
+    "payload": "kg",
+    "slosh": "kg",
+    "delay": "s",
+    "external_torque": "N m",
+    "gyro_scale": "",
 }
 
 SLOSH_FREQUENCY_HZ = 0.3

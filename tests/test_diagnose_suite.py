@@ -84,6 +84,7 @@ def test_magnitudes_reach_the_simulation_and_name_the_row(monkeypatch: pytest.Mo
         ("gyro_scale=abc", "got 'abc'"),
         ("gyro_scale=nan", "got 'nan'"),
         ("gyro_scale=1e-3,gyro_scale=2e-3", "'gyro_scale' given twice"),
+        (" , ", "expected effect=size pairs"),
     ],
 )
 def test_bad_magnitudes_are_refused_before_anything_runs(
@@ -97,16 +98,34 @@ def test_bad_magnitudes_are_refused_before_anything_runs(
 
 
 def test_the_same_seed_draws_the_same_direction_at_any_magnitude() -> None:
-    """``--magnitude`` scales the suite's effect without changing its draw (the same logs otherwise)."""
+    """``--magnitude`` scales the suite's effect without changing its draw or the fuel state (the same logs otherwise)."""
     import numpy as np
 
-    from spaceid_gym.effects import DEFAULT_MAGNITUDES, draw_effect
+    from spaceid_gym.effects import DEFAULT_MAGNITUDES
     from spaceid_gym.robots import load_robot
 
     robot = load_robot("paper6")
-    default, larger = (draw_effect("gyro_scale", np.random.default_rng([4, 1]), robot, 50.0, size) for size in (None, 2.6e-3))
+    (setting, default), (again, larger) = (suite.draw_case(robot, "gyro_scale", 4, size) for size in (None, 2.6e-3))
+    assert setting == again and default is not None and larger is not None
     np.testing.assert_allclose(
         np.asarray(larger.gyro_scale_misalignment),
         np.asarray(default.gyro_scale_misalignment) * 2.6e-3 / DEFAULT_MAGNITUDES["gyro_scale"],
         rtol=1e-12,
     )
+
+
+def test_a_size_one_log_cannot_have_is_refused_before_anything_runs(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "never"
+    code = main(["diagnose-suite", "--seeds", "20", "--effects", "slosh", "--magnitude", "slosh=10", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and "Traceback" not in err and not out.exists()
+    assert "--magnitude: slosh=10 on the log of seed 4" in err and "exceeds the remaining liquid" in err
+
+
+def test_the_summary_keeps_sizes_apart_and_labels_them_with_their_unit() -> None:
+    rows = [_row("payload", 0) | {"magnitude": "default"}, _row("payload", 1) | {"magnitude": 20.0}]
+    rows[1]["correct"] = False
+    summary = suite.summarise(rows)
+    assert [(s["magnitude"], s["correct_percent"]) for s in summary] == [("default", 100.0), (20.0, 0.0)]
+    table = suite.markdown_table(summary)
+    assert "| payload | 1 | 100 % |" in table and "| payload (magnitude 20 kg) | 1 | 0 % |" in table

@@ -394,6 +394,26 @@ def test_quadratic_step_halves_its_trust_radius_after_a_miss_and_doubles_it_afte
     assert best.tried[-1] == pytest.approx(0.05)
     monkeypatch.setattr(improved, "quadratic_step", lambda *args: np.array([-0.4, 0.0]))  # uphill at any length
     assert swarm._check_quadratic(best, recent, improved.MIN_TRUST_RADIUS) == improved.MIN_TRUST_RADIUS  # type: ignore[arg-type]
+    tried = len(best.tried)
+    monkeypatch.setattr(improved, "quadratic_step", lambda *args: np.zeros(2))  # no step: nothing evaluated
+    assert swarm._check_quadratic(best, recent, 0.3) == 0.3 and len(best.tried) == tried  # type: ignore[arg-type]
+
+
+def test_the_search_passes_each_generations_trust_radius_to_the_next(problem: IdentificationProblem, monkeypatch: Any) -> None:
+    given: list[float] = []
+    returned: list[float] = []
+    check = ImprovedPSO._check_quadratic
+
+    def spy(self: ImprovedPSO, best: Any, recent: Any, radius: float) -> float:
+        given.append(radius)
+        returned.append(check(self, best, recent, radius))
+        return returned[-1]
+
+    monkeypatch.setattr(ImprovedPSO, "_check_quadratic", spy)
+    ImprovedPSO(n_generations=12, seed=0).fit_problem(problem)
+    assert len(given) == 12 and given[0] == np.inf  # unbounded at first
+    assert given[1:] == returned[:-1]  # what one generation returns, the next receives
+    assert len(set(returned)) > 2  # and it changes
 
 
 # ---------------------------------------------------------------------- not in the paper: following the incumbent

@@ -36,7 +36,10 @@ from estimators.problem import IdentificationModel
 from spaceid_gym.errors import SpaceIdInputError
 
 if TYPE_CHECKING:
+    from estimators.evaluation import Setting
+    from spaceid_gym.effects import HiddenEffects
     from spaceid_gym.envs.free_floating import FreeFloatingIDEnv
+    from spaceid_gym.robots import Robot
 
 #: options of :class:`~agents.excitation.FourierExcitation` for the suite (see the module docstring)
 DIAGNOSTIC_EXCITATION: dict[str, Any] = {"base_frequency_hz": 0.05, "n_harmonics": 10}
@@ -55,22 +58,32 @@ SUITE_EFFECTS: tuple[str, ...] = (
 )
 
 
-def simulate_case(
-    robot_name: str, effect: str, seed: int, duration_s: float = 60.0, magnitude: float | None = None
-) -> FreeFloatingIDEnv:
-    """The suite's log of ``effect`` (``none``: clean) and ``seed``: the simulated env after the window (its
-    ``measurement_log()``, ``truth()`` and ``hidden_effects``). ``magnitude``: the effect's size in the unit of
-    :data:`spaceid_gym.effects.DEFAULT_MAGNITUDES` (``None``: the default); the direction drawn does not depend on it."""
-    from agents.excitation import FourierExcitation
-    from estimators.evaluation import draw_settings
-    from spaceid_gym.datasets import simulate_episode
-    from spaceid_gym.effects import draw_effect
-    from spaceid_gym.robots import load_robot
+def draw_case(robot: Robot, effect: str, seed: int, magnitude: float | None = None) -> tuple[Setting, HiddenEffects | None]:
+    """The fuel state and the hidden effect (``None`` for ``none``) of the suite's log of ``effect`` and ``seed``.
 
-    robot = load_robot(robot_name)
+    ``magnitude``: the effect's size in the unit of :data:`spaceid_gym.effects.MAGNITUDE_UNITS` (``None``: the
+    default of :data:`spaceid_gym.effects.DEFAULT_MAGNITUDES`); the direction drawn does not depend on it. Raises :class:`SpaceIdInputError` for a size the
+    log cannot have (a slosh mass above the liquid left)."""
+    from estimators.evaluation import draw_settings
+    from spaceid_gym.effects import draw_effect
+
     setting = draw_settings(robot, 1, seed)[0]
     rng = np.random.default_rng([seed, 1])
     hidden = None if effect == NO_MISSING_EFFECT else draw_effect(effect, rng, robot, setting.fuel_consumed_kg, magnitude)
+    return setting, hidden
+
+
+def simulate_case(
+    robot_name: str, effect: str, seed: int, duration_s: float = 60.0, magnitude: float | None = None
+) -> FreeFloatingIDEnv:
+    """The suite's log of ``effect`` (``none``: clean) and ``seed`` (:func:`draw_case`): the simulated env after the
+    window (its ``measurement_log()``, ``truth()`` and ``hidden_effects``)."""
+    from agents.excitation import FourierExcitation
+    from spaceid_gym.datasets import simulate_episode
+    from spaceid_gym.robots import load_robot
+
+    robot = load_robot(robot_name)
+    setting, hidden = draw_case(robot, effect, seed, magnitude)
     return simulate_episode(
         robot,
         duration_s,
@@ -136,14 +149,18 @@ def _magnitude_cell(magnitude: float | None) -> float | str:
 
 
 def parse_magnitudes(text: str | None, effects: tuple[str, ...]) -> dict[str, float]:
-    """``"gyro_scale=2.6e-3,payload=20"`` -> ``{"gyro_scale": 0.0026, "payload": 20.0}``, for effects of this run.
+    """``"gyro_scale=2.6e-3,payload=20"`` -> ``{"gyro_scale": 0.0026, "payload": 20.0}``, for effects of this run
+    (units: :data:`spaceid_gym.effects.MAGNITUDE_UNITS`; ``None``: no sizes given).
 
     Raises:
-        SpaceIdInputError: a pair that is not ``name=number``, an effect not among ``effects`` (or ``none``),
-            an effect given twice, a size that is not a finite number > 0.
+        SpaceIdInputError: an empty text, a pair that is not ``name=number``, an effect not among ``effects``
+            (or ``none``), an effect given twice, a size that is not a finite number > 0.
     """
+    pairs = [] if text is None else [p.strip() for p in text.split(",") if p.strip()]
+    if text is not None and not pairs:
+        raise SpaceIdInputError(f"--magnitude: expected effect=size pairs such as 'gyro_scale=2.6e-3', got {text!r}")
     out: dict[str, float] = {}
-    for pair in [] if text is None else [p.strip() for p in text.split(",") if p.strip()]:
+    for pair in pairs:
         name, sep, value = (part.strip() for part in pair.partition("="))
         if not sep or name == NO_MISSING_EFFECT or name not in effects:
             allowed = ", ".join(e for e in effects if e != NO_MISSING_EFFECT)
@@ -158,6 +175,20 @@ def parse_magnitudes(text: str | None, effects: tuple[str, ...]) -> dict[str, fl
             raise SpaceIdInputError(f"--magnitude: {name}: expected a finite size > 0, got {value!r}")
         out[name] = size
     return out
+
+
+def check_magnitudes(robot_name: str, magnitudes: dict[str, float], seeds: range) -> None:
+    """Draw every log's effect at its given size (no simulation), so a size a log cannot have (a slosh mass above
+    the liquid left in its tank) is refused before the suite runs. Raises :class:`SpaceIdInputError` naming the seed."""
+    from spaceid_gym.robots import load_robot
+
+    robot = load_robot(robot_name)
+    for effect, size in magnitudes.items():
+        for seed in seeds:
+            try:
+                draw_case(robot, effect, seed, size)
+            except SpaceIdInputError as exc:
+                raise SpaceIdInputError(f"--magnitude: {effect}={size:g} on the log of seed {seed}: {exc}") from None
 
 
 def run_suite(
@@ -236,13 +267,13 @@ def summarise(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Per hidden effect: logs, correct %, verdict counts, residual RMS / noise after, RMS of the z-scores before and
     after (bound at the truth; ``..._at_estimate``: the estimates' own bounds)."""
     out = []
-    for effect in dict.fromkeys(r["effect"] for r in rows):
-        every = [r for r in rows if r["effect"] == effect]
+    for effect, size in dict.fromkeys((r["effect"], r.get("magnitude", "default")) for r in rows):
+        every = [r for r in rows if r["effect"] == effect and r.get("magnitude", "default") == size]
         group = [r for r in every if r["verdict"] != ERROR_VERDICT]  # the figures: logs that were diagnosed
         named = [r for r in group if r["correct"]]
         entry: dict[str, Any] = {
             "effect": effect,
-            "magnitude": every[0].get("magnitude", "default"),
+            "magnitude": size,
             "logs": len(every),
             "correct_percent": 100.0 * len(named) / len(every),
             "verdicts": dict(Counter(r["verdict"] for r in every).most_common()),
@@ -262,9 +293,14 @@ def summarise(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 
 def _effect_label(entry: dict[str, Any]) -> str:
-    """An effect's name in the table, with its size when it is not the default."""
+    """An effect's name in the table, with its size and unit when it is not the default."""
+    from spaceid_gym.effects import MAGNITUDE_UNITS
+
     size = entry.get("magnitude", "default")
-    return entry["effect"] if size == "default" else f"{entry['effect']} (magnitude {size:g})"
+    if size == "default":
+        return str(entry["effect"])
+    unit = MAGNITUDE_UNITS[entry["effect"]]
+    return f"{entry['effect']} (magnitude {float(size):g}{' ' + unit if unit else ''})"
 
 
 def markdown_table(summary: list[dict[str, Any]]) -> str:
