@@ -27,7 +27,7 @@ from scipy.optimize import brentq
 from scipy.stats import chi2, ncx2
 
 from estimators.diagnostics.diagnose import DEFAULT_CANDIDATES, candidate_model, diagnose
-from estimators.diagnostics.suite import SUITE_EFFECTS, check_magnitudes, parse_magnitudes, simulate_case
+from estimators.diagnostics.suite import SUITE_EFFECTS, parse_magnitudes, simulate_case
 from estimators.models.attitude_channel import AttitudeChannel
 from estimators.problem import IdentificationModel
 from spaceid_gym.errors import SpaceIdInputError
@@ -66,8 +66,9 @@ def main() -> None:
     if args.seeds < 1:
         parser.error(f"--seeds: expected at least 1, got {args.seeds}")
     try:
-        magnitude = parse_magnitudes(None if args.magnitude is None else f"{args.effect}={args.magnitude}", (args.effect,))
-        check_magnitudes("paper6", magnitude, range(args.first_seed, args.first_seed + args.seeds))
+        seeds = range(args.first_seed, args.first_seed + args.seeds)
+        text = None if args.magnitude is None else f"{args.effect}={args.magnitude}"
+        magnitude = parse_magnitudes(text, (args.effect,), "paper6", seeds)
     except SpaceIdInputError as exc:
         parser.error(str(exc))
     size = magnitude.get(args.effect)

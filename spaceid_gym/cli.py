@@ -313,7 +313,6 @@ def _diagnose_suite(args: argparse.Namespace) -> int:
     from estimators.diagnostics.suite import (
         DIAGNOSTIC_EXCITATION,
         SUITE_EFFECTS,
-        check_magnitudes,
         code_version,
         failed_rows,
         parse_magnitudes,
@@ -327,8 +326,7 @@ def _diagnose_suite(args: argparse.Namespace) -> int:
     unknown = [e for e in effects if e not in SUITE_EFFECTS]
     if unknown:
         raise SpaceIdInputError(f"--effects: unknown {unknown}; expected names from {', '.join(SUITE_EFFECTS)}")
-    magnitudes = parse_magnitudes(args.magnitude, effects)
-    check_magnitudes(args.robot, magnitudes, range(args.first_seed, args.first_seed + args.seeds))
+    magnitudes = parse_magnitudes(args.magnitude, effects, args.robot, range(args.first_seed, args.first_seed + args.seeds))
     start, version = time.perf_counter(), code_version()  # the code that runs, read before it runs
     rows = run_suite(args.robot, effects, args.seeds, args.first_seed, args.jobs, magnitudes=magnitudes)
     info = {

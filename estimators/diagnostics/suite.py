@@ -148,13 +148,15 @@ def _magnitude_cell(magnitude: float | None) -> float | str:
     return "default" if magnitude is None else magnitude
 
 
-def parse_magnitudes(text: str | None, effects: tuple[str, ...]) -> dict[str, float]:
+def parse_magnitudes(text: str | None, effects: tuple[str, ...], robot_name: str, seeds: range) -> dict[str, float]:
     """``"gyro_scale=2.6e-3,payload=20"`` -> ``{"gyro_scale": 0.0026, "payload": 20.0}``, for effects of this run
-    (units: :data:`spaceid_gym.effects.MAGNITUDE_UNITS`; ``None``: no sizes given).
+    (units: :data:`spaceid_gym.effects.MAGNITUDE_UNITS`; ``None``: no sizes given), each drawn on every log of
+    ``seeds`` (no simulation) so that a size a log cannot have is refused before the suite runs.
 
     Raises:
         SpaceIdInputError: an empty text, a pair that is not ``name=number``, an effect not among ``effects``
-            (or ``none``), an effect given twice, a size that is not a finite number > 0.
+            (or ``none``), an effect given twice, a size that is not a finite number > 0, a size a log of
+            ``seeds`` cannot have (a slosh mass above the liquid left in its tank; the message names the seed).
     """
     pairs = [] if text is None else [p.strip() for p in text.split(",") if p.strip()]
     if text is not None and not pairs:
@@ -174,12 +176,12 @@ def parse_magnitudes(text: str | None, effects: tuple[str, ...]) -> dict[str, fl
         if not (math.isfinite(size) and size > 0.0):
             raise SpaceIdInputError(f"--magnitude: {name}: expected a finite size > 0, got {value!r}")
         out[name] = size
+    _draw_every_log(robot_name, out, seeds)
     return out
 
 
-def check_magnitudes(robot_name: str, magnitudes: dict[str, float], seeds: range) -> None:
-    """Draw every log's effect at its given size (no simulation), so a size a log cannot have (a slosh mass above
-    the liquid left in its tank) is refused before the suite runs. Raises :class:`SpaceIdInputError` naming the seed."""
+def _draw_every_log(robot_name: str, magnitudes: dict[str, float], seeds: range) -> None:
+    """Draw every log's effect at its given size; raises :class:`SpaceIdInputError` naming the seed of one it cannot have."""
     from spaceid_gym.robots import load_robot
 
     robot = load_robot(robot_name)
