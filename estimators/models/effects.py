@@ -25,9 +25,9 @@ search range) and acts in one of three places of the prediction:
 or, in a log without them, by integrating the logged gyro rate (its angle random walk, ~2e-4 rad over a
 minute for the default gyro, is negligible here).
 
-Plausibility (:meth:`EffectTerm.implausible`): an effect whose fitted value sits on its search bound is not
-plausible (it absorbs something else), and each term adds its physics (a payload must be a physical body,
-the slosh mass cannot exceed the liquid left in the tank).
+Plausibility (:meth:`EffectTerm.implausible`): an effect whose fitted value sits on its search bound, where the
+data can tell that bound from the nominal, is not plausible (it absorbs something else), and each term adds
+its physics (a payload must be a physical body, the slosh mass cannot exceed the liquid left in the tank).
 
 The simulator implements the same effects independently as physics (:mod:`spaceid_gym.effects`); tests
 compare the two. Both share the field names of ``truth.json``'s ``hidden_effects``:
@@ -53,6 +53,10 @@ from spaceid_gym.robots import Robot
 from spaceid_gym.sim.lie import matrix_from_quat, so3_exp
 
 FloatArray = NDArray[np.float64]
+
+#: a fitted value on its search bound makes the effect implausible only if the bound is more than this many
+#: Cramér-Rao standard deviations from the nominal (see :meth:`EffectTerm.implausible`)
+BOUND_STD = 3.0
 
 
 @dataclass(frozen=True)
@@ -157,12 +161,19 @@ class EffectTerm(ABC):
     ) -> list[str]:
         """Reasons why ``theta`` (k_e,) is not physically plausible (empty if it is): by default, values on a search bound.
 
-        ``covariance`` (k_e, k_e), the fit's Cramér-Rao covariance, lets a term allow for the uncertainty of its test;
-        ``theta_base`` (k_base,), the base parameters of the same fit, lets it check against them (the slosh's liquid).
+        ``covariance`` (k_e, k_e), the fit's Cramér-Rao covariance, lets a term allow for the uncertainty of its test:
+        with it, a value on its bound counts only if the data tell that bound from the nominal, i.e. the bound is
+        more than :data:`BOUND_STD` standard deviations from it. A barely informed unknown (the misalignment of a
+        gyro axis that hardly turns: std 0.011 against a bound of 0.02) reaches its bound by noise alone, and
+        that says nothing about the effect. ``theta_base`` (k_base,), the base parameters of the same fit, lets
+        a term check against them (the slosh's liquid).
         """
         width = self.upper - self.lower
         on_bound = (theta <= self.lower + 1e-6 * width) | (theta >= self.upper - 1e-6 * width)
         on_bound &= np.abs(theta - self.nominal) > 1e-6 * width  # a nominal on a bound means "off"
+        if covariance is not None:
+            std = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
+            on_bound &= np.abs(theta - self.nominal) > BOUND_STD * std
         return [f"{n} = {v:.4g} is on its search bound" for n, v, hit in zip(self.names, theta, on_bound, strict=True) if hit]
 
 
@@ -350,7 +361,8 @@ class Payload(EffectTerm):
         """Besides the bounds: the mass must be positive and the pseudo-inertia positive definite, each beyond
         3 standard deviations of its estimate when ``covariance`` is given (a small object's inertia is barely
         informed, and noise alone can make its estimate slightly unphysical)."""
-        reasons = [r for r in super().implausible(theta) if not r.startswith(self.names[0])]  # mass >= 0 is physics below
+        # mass >= 0 is the physics below
+        reasons = [r for r in super().implausible(theta, covariance) if not r.startswith(self.names[0])]
         cov = np.zeros((10, 10)) if covariance is None else covariance
         if theta[0] <= -3.0 * np.sqrt(max(cov[0, 0], 0.0)) or theta[0] == 0.0:
             return [*reasons, f"payload mass {theta[0]:.3g} kg is not positive"]
