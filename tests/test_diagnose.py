@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import types
 
 import numpy as np
 import pytest
@@ -14,6 +15,7 @@ from estimators.diagnostics.diagnose import (
     UNEXPLAINED,
     ChannelWeights,
     ModelFit,
+    _prefer_encompassing,
     _score,
     _scored,
     _verdict,
@@ -189,6 +191,54 @@ def test_a_significant_effect_is_named_when_the_baseline_is_at_the_noise_in_aggr
     assert scale.significant and scale.explained_fraction == 1.0
     verdict, reason = _verdict(baseline, [scale], analysis=None, alpha=0.01)  # type: ignore[arg-type]
     assert verdict == "gyro_scale", reason
+
+
+def _seed3_mems_scale_fits(added_by_delay: float) -> tuple[ModelFit, ModelFit, ModelFit, ModelFit]:
+    """Scores of the suite's MEMS ``gyro_scale`` log of seed 3 (``paper6``, 60 s, both channels): baseline, delay
+    (lowest BIC), gyro_scale (74 lower in chi-square, 8 unknowns more) and both together, where adding the delay
+    to the scale lowers the chi-square by ``added_by_delay``."""
+    n = 18003
+    baseline = _scored_fit(None, 4, 18021.1, n)
+    delay = _scored_fit("delay", 5, 18021.1 - 19.3, n)
+    scale = _scored_fit("gyro_scale", 13, 18021.1 - 74.0, n)
+    both = dataclasses.replace(_scored_fit("gyro_scale", 14, scale.chi2 - added_by_delay, n), effects=("delay", "gyro_scale"))
+    for fit in (delay, scale):
+        fit.lr_statistic = baseline.chi2 - fit.chi2
+        fit.p_value = nested_p_value(baseline, fit)
+    return baseline, delay, scale, both
+
+
+@pytest.mark.parametrize(("added_by_delay", "expected"), [(1.7, "gyro_scale"), (30.0, "delay"), (float("nan"), "delay")])
+def test_a_candidate_that_encompasses_the_bic_leader_is_named(added_by_delay: float, expected: str) -> None:
+    """BIC charges the scale's 8 extra unknowns 8 ln n = 78 and named the delay. Fitted together, the scale adds
+    56 to the delay (p = 7e-9) and the delay 1.7 to the scale (p = 0.19): the scale encompasses the delay and is
+    named. When the delay also adds significantly (both effects present), or without the joint fit, the BIC leader
+    stays."""
+    baseline, delay, scale, both = _seed3_mems_scale_fits(added_by_delay)
+    combined = [] if np.isnan(added_by_delay) else [both]
+    assert min((delay, scale), key=lambda f: f.bic) is delay
+    verdict, reason = _verdict(baseline, [delay, scale], analysis=None, alpha=0.01, combined=combined)  # type: ignore[arg-type]
+    assert verdict == expected, reason
+    assert ("encompasses delay" in reason) == (expected == "gyro_scale")
+    assert _prefer_encompassing(delay, [delay, scale], combined, 0.01)[0].effect == expected
+
+
+@pytest.mark.parametrize(
+    ("excess_z", "white", "expected"), [(0.6, True, "gyro_scale"), (0.6, False, UNEXPLAINED), (3.0, True, UNEXPLAINED)]
+)
+def test_a_candidate_explaining_little_of_a_noisy_excess_is_named_if_it_leaves_noise(
+    excess_z: float, white: bool, expected: str
+) -> None:
+    """The suite's MEMS ``gyro_scale`` log of seed 12: the scale lowers the chi-square by 30 (p = 4e-4), 23 % of the
+    baseline's excess of 131, which itself varies by about 134 from log to log. It is named when what it leaves
+    is white and its chi-square within the 99 % quantile of its degrees of freedom (z < 2.33), not otherwise."""
+    baseline = _scored_fit(None, 4, 18127.7, 18003)
+    scale = _scored_fit("gyro_scale", 13, 18127.7 - 30.1, 18003)
+    scale.explained_fraction, scale.excess_z, scale.residual_white = 0.23, excess_z, white
+    analysis = types.SimpleNamespace(structure_description=lambda: "described")
+    verdict, reason = _verdict(baseline, [scale], analysis=analysis, alpha=0.01)  # type: ignore[arg-type]
+    assert verdict == expected, reason
+    assert ("white residual consistent with the noise" in reason) == (expected == "gyro_scale")
 
 
 def test_a_fit_with_more_slosh_than_liquid_is_implausible(short_fuel_episode) -> None:

@@ -227,3 +227,20 @@ def test_attitude_channel_needs_a_star_tracker(paper6: Robot) -> None:
     assert AttitudeChannel.of(IdentificationModel(paper6, "fuel"), bare) is None
     with pytest.raises(SpaceIdInputError, match="no attitude quaternions"):
         midpoint_log(bare)
+
+
+def test_a_value_on_its_bound_is_implausible_only_where_the_data_can_tell_the_bound(paper6: Robot) -> None:
+    """The suite's MEMS ``gyro_scale`` log of seed 1: the base barely turns about x, so the misalignment ``scale_zx``
+    has a Cramér-Rao std of 0.011 and its fit reached the bound 0.02 (1.8 std from zero) by noise. That is no sign
+    of an effect absorbing something else; the same value on a bound 20 std from zero is."""
+    (scale,) = make_terms("gyro_scale", paper6)
+    theta = np.zeros(9)
+    theta[6] = scale.upper[6]
+    assert scale.implausible(theta) == ["scale_zx = 0.02 is on its search bound"]  # no covariance: every bound counts
+    barely_informed = np.diag(np.full(9, 0.011**2))
+    assert scale.implausible(theta, barely_informed) == []
+    well_informed = np.diag(np.full(9, 1e-3**2))
+    assert scale.implausible(theta, well_informed) == ["scale_zx = 0.02 is on its search bound"]
+    inside = theta.copy()
+    inside[6] = 0.019
+    assert scale.implausible(inside, well_informed) == []

@@ -48,7 +48,8 @@ For a model (robot, parameterisation, effects already in it) and a log, :func:`d
    otherwise, with the residual structure described (dominant frequencies, correlated inputs, where in time).
 
 ``Diagnosis.to_dict()`` is the ``diagnose --out`` JSON: ``verdict`` (a catalogue name, ``none`` or
-``unexplained``) and ``candidates`` (best first, each with ``effect`` and its figures).
+``unexplained``), ``candidates`` (the named one first, then by BIC; each with ``effect`` and its figures) and
+``combined`` (the joint fits of the encompassing test).
 """
 
 from __future__ import annotations
@@ -262,6 +263,7 @@ class Diagnosis:
                 if c.attitude_chi2 is None
                 else f"{c.attitude_chi2:.0f} / {c.n_attitude_values}",
                 "explained": f"{100 * c.explained_fraction:.0f} %",
+                "residual left white": {None: "not tested", True: "yes", False: "no"}[c.residual_white],
             }
             for c in self.candidates
         ]

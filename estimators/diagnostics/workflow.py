@@ -284,7 +284,10 @@ def write_report(result: LoopResult, path: str | Path, title: str = "Model again
     )
     page.add_paragraph(before.analysis.structure_description())
     page.add_heading("3. Which effect is missing")
-    page.add_table(d.ranking_table(), "Candidate effects, best first (BIC: lower is better; significance Bonferroni-corrected).")
+    page.add_table(
+        d.ranking_table(),
+        "Candidate effects, the named one first, then by BIC (lower is better; significance Bonferroni-corrected).",
+    )
     page.add_image(
         plot_ranking(figures / "ranking.png", [{"effect": c.effect, "bic_improvement": -c.delta_bic} for c in d.candidates]),
         "BIC improvement of each candidate over the model as it is.",
