@@ -208,12 +208,14 @@ def _seed3_mems_scale_fits(added_by_delay: float) -> tuple[ModelFit, ModelFit, M
     return baseline, delay, scale, both
 
 
-@pytest.mark.parametrize(("added_by_delay", "expected"), [(1.7, "gyro_scale"), (30.0, "delay"), (float("nan"), "delay")])
+@pytest.mark.parametrize(
+    ("added_by_delay", "expected"), [(1.7, "gyro_scale"), (30.0, "delay"), (-5.0, "delay"), (float("nan"), "delay")]
+)
 def test_a_candidate_that_encompasses_the_bic_leader_is_named(added_by_delay: float, expected: str) -> None:
     """BIC charges the scale's 8 extra unknowns 8 ln n = 78 and named the delay. Fitted together, the scale adds
     56 to the delay (p = 7e-9) and the delay 1.7 to the scale (p = 0.19): the scale encompasses the delay and is
-    named. When the delay also adds significantly (both effects present), or without the joint fit, the BIC leader
-    stays."""
+    named. The BIC leader stays when the delay also adds significantly (both effects present), when the joint
+    fit ends above the scale alone (it missed the joint optimum: no evidence either way), or without it."""
     baseline, delay, scale, both = _seed3_mems_scale_fits(added_by_delay)
     combined = [] if np.isnan(added_by_delay) else [both]
     assert min((delay, scale), key=lambda f: f.bic) is delay
@@ -224,21 +226,34 @@ def test_a_candidate_that_encompasses_the_bic_leader_is_named(added_by_delay: fl
 
 
 @pytest.mark.parametrize(
-    ("excess_z", "white", "expected"), [(0.6, True, "gyro_scale"), (0.6, False, UNEXPLAINED), (3.0, True, UNEXPLAINED)]
+    ("attitude_p_value", "gyro_consistent", "expected"),
+    [(0.2, True, "gyro_scale"), (0.2, False, UNEXPLAINED), (0.004, True, UNEXPLAINED)],
 )
 def test_a_candidate_explaining_little_of_a_noisy_excess_is_named_if_it_leaves_noise(
-    excess_z: float, white: bool, expected: str
+    attitude_p_value: float, gyro_consistent: bool, expected: str
 ) -> None:
     """The suite's MEMS ``gyro_scale`` log of seed 12: the scale lowers the chi-square by 30 (p = 4e-4), 23 % of the
-    baseline's excess of 131, which itself varies by about 134 from log to log. It is named when what it leaves
-    is white and its chi-square within the 99 % quantile of its degrees of freedom (z < 2.33), not otherwise."""
+    baseline's excess of 131, which itself varies by about 134 from log to log. It is named when its gyro residual
+    passes every residual test and the star tracker's chi-square is within its 99 % quantile, not otherwise."""
     baseline = _scored_fit(None, 4, 18127.7, 18003)
     scale = _scored_fit("gyro_scale", 13, 18127.7 - 30.1, 18003)
-    scale.explained_fraction, scale.excess_z, scale.residual_white = 0.23, excess_z, white
+    scale.explained_fraction, scale.attitude_p_value, scale.residual_consistent = 0.23, attitude_p_value, gyro_consistent
     analysis = types.SimpleNamespace(structure_description=lambda: "described")
     verdict, reason = _verdict(baseline, [scale], analysis=analysis, alpha=0.01)  # type: ignore[arg-type]
     assert verdict == expected, reason
-    assert ("white residual consistent with the noise" in reason) == (expected == "gyro_scale")
+    assert ("residual consistent with the noise" in reason) == (expected == "gyro_scale")
+
+
+def test_the_star_trackers_count_sets_the_attitude_p_value() -> None:
+    """``_score`` judges the star tracker's chi-square against its own count of values."""
+    n_gyro, n_attitude = 9000, 9000
+    baseline = dataclasses.replace(_scored_fit(None, 4, 0.0), rss=float(n_gyro), attitude_chi2=float(n_attitude) + 313.0)
+    scale = dataclasses.replace(_scored_fit("gyro_scale", 13, 0.0), rss=float(n_gyro - 13), attitude_chi2=9000.0)
+    for fit in (baseline, scale):
+        fit.n_residuals, fit.n_attitude_values = n_gyro, n_attitude
+    _score(baseline, [scale], alpha=0.01)
+    assert baseline.attitude_p_value == pytest.approx(0.01, abs=0.001)  # 9313 is its 99 % quantile
+    assert scale.attitude_p_value == pytest.approx(0.498, abs=0.001)  # at its count: just under one half
 
 
 def test_a_fit_with_more_slosh_than_liquid_is_implausible(short_fuel_episode) -> None:
@@ -248,8 +263,8 @@ def test_a_fit_with_more_slosh_than_liquid_is_implausible(short_fuel_episode) ->
     problem = model.problem(ep.log)
     usable = problem.parameters.terms[-1].upper[0]
     base = np.array([usable - 20.0, 0.25, -0.2, 0.1])
-    over = _scored(problem, np.concatenate((base, [60.0, 0.4, 0.05])), model, "slosh", (None, 0), 0.0)
-    within = _scored(problem, np.concatenate((base, [15.0, 0.4, 0.05])), model, "slosh", (None, 0), 0.0)
+    over = _scored(problem, np.concatenate((base, [60.0, 0.4, 0.05])), model, "slosh", (None, 0), None, None)
+    within = _scored(problem, np.concatenate((base, [15.0, 0.4, 0.05])), model, "slosh", (None, 0), None, None)
     assert any("exceeds the 20 kg of liquid left" in r for r in over.implausible), over.implausible
     assert within.plausible
 

@@ -38,12 +38,12 @@ For a model (robot, parameterisation, effects already in it) and a log, :func:`d
 
    The verdict names it if it explains at least :data:`EXPLAINED_FRACTION` of the baseline's excess over the
    noise (``X_baseline - (n - k)``, :func:`explained_fraction`) or if what it leaves is consistent with the
-   noise: its gyro residual white by every test of
-   :func:`~estimators.diagnostics.residuals.analyse_residuals` and its chi-square within the one-sided
-   ``1 - alpha`` quantile of its ``n - k`` degrees of freedom (``excess_z``). The excess itself varies by about
-   ±134 from log to log, through the star tracker's part, so a share of it is no test when it is that small;
-   and the gyro's chi-square is scaled to the best fit's residual, so structure left in the gyro shows in
-   the whiteness tests, not in the chi-square. ``"none"`` when no candidate is significant and the
+   noise: its gyro residual passes every test of :func:`~estimators.diagnostics.residuals.analyse_residuals`
+   (white, uncorrelated with the inputs, no failing segment) and, with attitude, the star tracker's
+   chi-square is below the ``1 - alpha`` quantile of its count (``attitude_p_value >= alpha``). The excess
+   itself varies by about ±134 from log to log through the star tracker's part (the gyro's chi-square is
+   scaled to the best fit's residual, so the gyro's part is at its count by construction), so a share of it
+   is no test when it is that small. ``"none"`` when no candidate is significant and the
    baseline residual is white (:func:`~estimators.diagnostics.residuals.analyse_residuals`); ``"unexplained"``
    otherwise, with the residual structure described (dominant frequencies, correlated inputs, where in time).
 
@@ -62,7 +62,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
-from scipy.stats import chi2, norm
+from scipy.stats import chi2
 
 from estimators.base import Estimator
 from estimators.diagnostics.residuals import ResidualAnalysis, analyse_residuals
@@ -102,8 +102,9 @@ def explained_fraction(lr_statistic: float, excess: float) -> float:
 class CandidateScores:
     """A candidate fit's scores against the baseline (filled in once every model is fitted; ``nan`` until then):
     ``bic``, ``delta_bic`` (to the baseline), ``lr_statistic``, ``p_value``, ``significant``,
-    ``explained_fraction`` (of the baseline's excess over the noise, :func:`explained_fraction`) and ``excess_z``
-    (the fit's own chi-square above its degrees of freedom, ``(X - (n - k)) / sqrt(2 (n - k))``)."""
+    ``explained_fraction`` (of the baseline's excess over the noise, :func:`explained_fraction`) and
+    ``attitude_p_value`` (of the star tracker's chi-square against its count, chi-square with that many degrees
+    of freedom; ``nan`` without attitude)."""
 
     bic: float = math.nan
     delta_bic: float = math.nan
@@ -111,7 +112,7 @@ class CandidateScores:
     p_value: float = math.nan
     significant: bool = False
     explained_fraction: float = math.nan
-    excess_z: float = math.nan
+    attitude_p_value: float = math.nan
 
     def scores(self) -> dict[str, Any]:
         """The scores as a JSON-able dict."""
@@ -122,7 +123,7 @@ class CandidateScores:
             "p_value": self.p_value,
             "significant": self.significant,
             "explained_fraction": self.explained_fraction,
-            "excess_z": self.excess_z,
+            "attitude_p_value": self.attitude_p_value,
         }
 
 
@@ -149,8 +150,8 @@ class ModelFit(CandidateScores):
         physical: the fitted quantities (base and effects), as in the estimate file.
         implausible: reasons why the fitted effect is not physical (empty if plausible).
         wall_time_s: time of the fit.
-        chi2: both channels' chi-square (:func:`_score`); ``residual_white``: whether the fit's gyro residual passes
-            every test of :func:`~estimators.diagnostics.residuals.analyse_residuals` (``None``: not analysed).
+        chi2: both channels' chi-square (:func:`_score`); ``residual_consistent``: whether the fit's gyro residual
+            passes every test of :func:`~estimators.diagnostics.residuals.analyse_residuals` (``None``: not analysed).
     """
 
     effects: tuple[str, ...]
@@ -166,7 +167,7 @@ class ModelFit(CandidateScores):
     implausible: list[str]
     wall_time_s: float
     chi2: float = math.nan  # filled in by :func:`diagnose` once every model is fitted
-    residual_white: bool | None = None  # filled in by :func:`diagnose` for the significant and plausible candidates
+    residual_consistent: bool | None = None  # filled in by :func:`diagnose` for the significant and plausible ones
 
     @property
     def residual_rms_rad_s(self) -> float:
@@ -187,7 +188,7 @@ class ModelFit(CandidateScores):
             "rss": self.rss,
             "attitude_chi2": self.attitude_chi2,
             "chi2": self.chi2,
-            "residual_white": self.residual_white,
+            "residual_consistent": self.residual_consistent,
             **self.scores(),
             "plausible": self.plausible,
             "implausible": list(self.implausible),
@@ -249,7 +250,7 @@ class Diagnosis:
         }
 
     def ranking_table(self) -> list[dict[str, Any]]:
-        """One row per candidate (best first) for a report table."""
+        """One row per candidate (the named one first, then by BIC) for a report table."""
         return [
             {
                 "effect": c.effect,
@@ -263,7 +264,7 @@ class Diagnosis:
                 if c.attitude_chi2 is None
                 else f"{c.attitude_chi2:.0f} / {c.n_attitude_values}",
                 "explained": f"{100 * c.explained_fraction:.0f} %",
-                "residual left white": {None: "not tested", True: "yes", False: "no"}[c.residual_white],
+                "leaves noise (gyro tests)": {None: "not tested", True: "yes", False: "no"}[c.residual_consistent],
             }
             for c in self.candidates
         ]
@@ -309,13 +310,16 @@ def fit_model(
         else:
             scores = [float(r @ r) for r in (problem.residuals(x, count=False) for x in results)]
             theta = results[int(np.argmin(scores))]
-    attitude_chi2 = None
+    attitude_chi2, attitude_information = None, None
     if channel is not None:
         assert weights is not None
         attitude = channel.residuals(theta) / weights.attitude_std_rad
         attitude_chi2 = float(attitude @ attitude)
+        attitude_information = channel.fisher(theta, weights.attitude_std_rad)
     n_attitude = 0 if channel is None else channel.n_values
-    return _scored(problem, theta, model, effect, (attitude_chi2, n_attitude), time.perf_counter() - begin), estimate
+    fit = _scored(problem, theta, model, effect, (attitude_chi2, n_attitude), attitude_information, weights)
+    fit.wall_time_s = time.perf_counter() - begin
+    return fit, estimate
 
 
 #: accepted least-squares steps per start of a candidate fit
@@ -364,9 +368,13 @@ def _scored(
     model: IdentificationModel,
     effect: str | None,
     attitude: tuple[float | None, int],
-    wall: float,
+    attitude_information: FloatArray | None,
+    weights: ChannelWeights | None,
 ) -> ModelFit:
-    """The fit at ``theta``: gyro residual, plausibility, and ``attitude`` (its chi-square or ``None``, its values)."""
+    """The fit at ``theta``: gyro residual, plausibility, and ``attitude`` (its chi-square or ``None``, its values).
+
+    Plausibility allows for the Cramér-Rao covariance of the channels fitted: the gyro's (at ``weights``' gyro
+    noise when given) plus ``attitude_information`` (k, k), the star tracker's Fisher information, when given."""
     residual = problem.residuals(theta, count=False)
     params = problem.parameters
     implausible: list[str] = []
@@ -374,7 +382,10 @@ def _scored(
         assert isinstance(params, WithEffects)
         term = next(t for t in params.terms if t.name == effect)
         part = np.arange(params.n_params)[params.term_parts(np.arange(params.n_params))[term].astype(int)]
-        covariance = np.linalg.pinv(problem.fisher(theta), rcond=1e-12, hermitian=True)[np.ix_(part, part)]
+        information = problem.fisher(theta, None if weights is None else weights.gyro_std_rad_s)
+        if attitude_information is not None:
+            information = information + attitude_information
+        covariance = np.linalg.pinv(information, rcond=1e-12, hermitian=True)[np.ix_(part, part)]
         implausible = term.implausible(params.term_parts(theta)[term], covariance, params.base_part(theta))
     return ModelFit(
         effects=model.effects,
@@ -388,7 +399,7 @@ def _scored(
         n_attitude_values=attitude[1],
         physical=params.physical(theta),
         implausible=implausible,
-        wall_time_s=wall,
+        wall_time_s=0.0,
     )
 
 
@@ -448,7 +459,8 @@ def diagnose(
     combined = _fit_challengers(model, log, baseline, fits, alpha, weights, sigma)
     for fit in fits:
         if fit.significant and fit.plausible:
-            fit.residual_white = _analyse_fit(candidate_model(model, str(fit.effect)), log, fit.theta, sigma).white
+            analysed = _analyse_fit(candidate_model(model, str(fit.effect)), log, fit.theta, sigma)
+            fit.residual_consistent = analysed.consistent_with_noise
     analysis = _analyse_fit(model, log, baseline.theta, sigma)
     verdict, reason = _verdict(baseline, fits, analysis, alpha, combined)
     fits.sort(key=lambda f: (f.effect != verdict, f.bic))
@@ -477,8 +489,11 @@ def _fit_challengers(
     weights: ChannelWeights | None,
     sigma: float,
 ) -> list[ModelFit]:
-    """The leader (:func:`_leader`) fitted together with each of its challengers (:func:`_challengers`), scored
-    with the gyro noise std ``sigma`` (rad/s) of the other fits; the fit's ``effect`` is the challenger."""
+    """The leader (:func:`_leader`) fitted together with each of its challengers (:func:`_challengers`).
+
+    Each joint fit starts from both fits and from each with the other effect at its nominal (off), and is scored
+    with the gyro noise std ``sigma`` (rad/s) of the other fits: ``chi2``, and ``lr_statistic`` / ``p_value``
+    against the leader (adding the challenger to it); its ``effect`` is the challenger."""
     named = [f for f in fits if f.significant and f.plausible]
     if not named:
         return []
@@ -487,12 +502,21 @@ def _fit_challengers(
     combined = []
     for challenger in _challengers(leader, named):
         both = candidate_model(candidate_model(model, str(leader.effect)), str(challenger.effect))
+        params = both.parameters
+        assert isinstance(params, WithEffects)
+        leader_off, challenger_off = (term.nominal for term in params.terms[-2:])
+        leader_base, leader_term = leader.theta[:k0], leader.theta[k0:]
+        challenger_base, challenger_term = challenger.theta[:k0], challenger.theta[k0:]
         starts = [
-            np.concatenate((leader.theta, challenger.theta[k0:])),
-            np.concatenate((challenger.theta[:k0], leader.theta[k0:], challenger.theta[k0:])),
+            np.concatenate((leader_base, leader_term, challenger_term)),
+            np.concatenate((challenger_base, leader_term, challenger_term)),
+            np.concatenate((leader_base, leader_term, challenger_off)),
+            np.concatenate((challenger_base, leader_off, challenger_term)),
         ]
         fit = fit_model(both, log, starts=starts, effect=challenger.effect, weights=weights)[0]
         fit.chi2 = _chi2(fit, sigma * sigma)
+        fit.lr_statistic = leader.chi2 - fit.chi2
+        fit.p_value = nested_p_value(leader, fit)
         combined.append(fit)
     return combined
 
@@ -507,7 +531,8 @@ def _score(baseline: ModelFit, fits: list[ModelFit], alpha: float) -> float:
     for f in everything:
         f.bic = f.chi2 + f.n_params * math.log(n)
         f.delta_bic = f.bic - baseline.bic
-        f.excess_z = (f.chi2 - (n - f.n_params)) / math.sqrt(2.0 * (n - f.n_params))
+        if f.attitude_chi2 is not None:
+            f.attitude_p_value = float(chi2.sf(f.attitude_chi2, f.n_attitude_values))
     excess = baseline.chi2 - (n - baseline.n_params)
     for f in fits:
         k = f.n_params - baseline.n_params
@@ -537,18 +562,18 @@ def _verdict(
         leader = _leader(named, alpha)
         best, encompassing = _prefer_encompassing(leader, named, combined, alpha)
         explains = best.explained_fraction >= EXPLAINED_FRACTION
-        if explains or (best.excess_z < norm.isf(alpha) and best.residual_white):
+        if explains or (best.residual_consistent and not best.attitude_p_value < alpha):
             why = [
                 f"adding {best.effect} lowers the chi-square by {best.lr_statistic:.1f} (p = {best.p_value:.2g}, BIC "
                 f"{best.delta_bic:+.1f}) and "
                 + (
                     f"explains {100 * best.explained_fraction:.0f} % of the excess over the noise"
                     if explains
-                    else f"leaves a white residual consistent with the noise (chi-square {best.excess_z:+.1f} std from "
-                    "its degrees of freedom)"
+                    else "leaves a residual consistent with the noise (gyro: every residual test passes; star tracker: "
+                    f"p = {best.attitude_p_value:.2g} against its count)"
                 )
             ]
-            if leader is not lowest:
+            if leader is not lowest and best is leader:
                 why.append(
                     f"it contains {lowest.effect} (lower BIC) and fits significantly better (likelihood ratio "
                     f"{lowest.chi2 - leader.chi2:.1f}, p = {nested_p_value(lowest, leader):.2g})"
@@ -556,11 +581,11 @@ def _verdict(
             if encompassing:
                 why.append(encompassing)
             return str(best.effect), "; ".join(why)
-        left = "a structured residual" if best.residual_white is False else "a residual"
+        left = "a structured gyro residual" if best.residual_consistent is False else "a residual"
         return UNEXPLAINED, (
             f"the best significant candidate ({best.effect}) explains only {100 * best.explained_fraction:.0f} % of the "
-            f"excess over the noise and leaves {left}, its chi-square {best.excess_z:+.1f} std from its degrees of "
-            f"freedom; {analysis.structure_description()}"
+            f"excess over the noise and leaves {left} (star tracker: p = {best.attitude_p_value:.2g} against its "
+            f"count); {analysis.structure_description()}"
         )
     significant = [f for f in fits if f.significant]
     if not significant and analysis.white:
@@ -569,6 +594,10 @@ def _verdict(
         rejected = "; ".join(f"{f.effect}: {', '.join(f.implausible)}" for f in significant)
         return UNEXPLAINED, f"the significant candidates are not physical ({rejected}); {analysis.structure_description()}"
     return UNEXPLAINED, f"no candidate is significant but the residual is structured: {analysis.structure_description()}"
+
+
+#: chi-square units a joint fit may end above the better of its two parts by rounding (see :func:`_prefer_encompassing`)
+JOINT_FIT_SLACK = 0.01
 
 
 def _leader(named: list[ModelFit], alpha: float) -> ModelFit:
@@ -590,25 +619,28 @@ def _prefer_encompassing(
 ) -> tuple[ModelFit, str]:
     """``leader``, or a challenger that encompasses it, and a sentence saying so ("" if none does).
 
-    ``combined``: the leader fitted with each challenger (:func:`_fit_challengers`; scored like the candidates).
-    A challenger encompasses the leader when, fitted together, adding the challenger to the leader lowers the
-    chi-square significantly and adding the leader to the challenger does not, both at ``alpha / m`` with ``m``
-    the number of challengers (chi-square with the number of unknowns added). Of several, the lowest BIC.
+    ``combined``: the leader fitted with each challenger (:func:`_fit_challengers`). A challenger encompasses the
+    leader when, fitted together, adding the challenger to the leader lowers the chi-square significantly, at
+    ``alpha / m`` with ``m`` the number of challengers, and adding the leader to the challenger does not, at
+    ``alpha`` (not divided: more challengers must not make "adds nothing" easier to pass); each chi-square with
+    the number of unknowns added. A joint fit that ends more than :data:`JOINT_FIT_SLACK` above the better of
+    the two alone has not found the joint optimum and decides nothing. Of several, the lowest BIC.
     """
     challengers = _challengers(leader, named)
     level = alpha / max(len(challengers), 1)
     winners = []
     for challenger in challengers:
-        both = next((c for c in combined if c.effect == challenger.effect and leader.effect in c.effects), None)
-        if both is None:
+        pair = (str(leader.effect), str(challenger.effect))
+        both = next((c for c in combined if c.effects[-2:] == pair), None)
+        if both is None or not both.chi2 <= min(leader.chi2, challenger.chi2) + JOINT_FIT_SLACK:
             continue
-        if nested_p_value(leader, both) < level and nested_p_value(challenger, both) >= level:
+        if nested_p_value(leader, both) < level and nested_p_value(challenger, both) >= alpha:
             winners.append((challenger, both))
     if not winners:
         return leader, ""
     best, both = min(winners, key=lambda w: w[0].bic)
     return best, (
-        f"it encompasses {leader.effect} (lower BIC): fitted together, adding {best.effect} to {leader.effect} lowers "
+        f"it encompasses {leader.effect}: fitted together, adding {best.effect} to {leader.effect} lowers "
         f"the chi-square by {leader.chi2 - both.chi2:.1f} (p = {nested_p_value(leader, both):.2g}) and adding "
         f"{leader.effect} to {best.effect} by {best.chi2 - both.chi2:.1f} (p = {nested_p_value(best, both):.2g})"
     )
