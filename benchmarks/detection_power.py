@@ -75,7 +75,7 @@ def main() -> None:
     dof = candidate_model(IdentificationModel("paper6", "fuel"), args.effect).parameters.terms[-1].n_params
     threshold = chi2.isf(ALPHA / len(DEFAULT_CANDIDATES), dof)
     powers, lambdas = [], []
-    for seed in range(args.first_seed, args.first_seed + args.seeds):
+    for seed in seeds:
         lam = non_centrality(args.effect, seed, magnitude=size)
         lambdas.append(lam)
         powers.append(ncx2.sf(threshold, dof, lam))

@@ -63,6 +63,8 @@ def test_hidden_gyro_bias_is_named_and_adding_it_brings_the_errors_back(paper6: 
     d = result.diagnosis
     assert d.verdict == "gyro_bias", d.reason
     assert d.candidates[0].effect == "gyro_bias" and d.candidates[0].significant and d.candidates[0].plausible
+    assert d.candidates[0].residual_consistent is True  # what it leaves passes every residual test
+    assert d.combined == []  # no other candidate is named, so no joint fit is made
     fitted = d.best.physical["gyro_bias_rad_s"]
     assert np.all(np.abs(fitted - truth["hidden_effects"]["gyro_bias_rad_s"]) < 1e-5)  # ~4 std of a 30 s log
     assert result.after is not None and result.applied == "gyro_bias"

@@ -178,6 +178,11 @@ class ModelFit(CandidateScores):
     def plausible(self) -> bool:
         return not self.implausible
 
+    @property
+    def nameable(self) -> bool:
+        """Significant and plausible: a candidate the verdict may name (scores from :func:`_score`)."""
+        return self.significant and self.plausible
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-able summary."""
         return {
@@ -458,7 +463,7 @@ def diagnose(
     sigma = _score(baseline, fits, alpha)
     combined = _fit_challengers(model, log, baseline, fits, alpha, weights, sigma)
     for fit in fits:
-        if fit.significant and fit.plausible:
+        if fit.nameable:
             analysed = _analyse_fit(candidate_model(model, str(fit.effect)), log, fit.theta, sigma)
             fit.residual_consistent = analysed.consistent_with_noise
     analysis = _analyse_fit(model, log, baseline.theta, sigma)
@@ -494,7 +499,7 @@ def _fit_challengers(
     Each joint fit starts from both fits and from each with the other effect at its nominal (off), and is scored
     with the gyro noise std ``sigma`` (rad/s) of the other fits: ``chi2``, and ``lr_statistic`` / ``p_value``
     against the leader (adding the challenger to it); its ``effect`` is the challenger."""
-    named = [f for f in fits if f.significant and f.plausible]
+    named = [f for f in fits if f.nameable]
     if not named:
         return []
     leader = _leader(named, alpha)
@@ -556,7 +561,7 @@ def _verdict(
     combined: list[ModelFit] | tuple[ModelFit, ...] = (),
 ) -> tuple[str, str]:
     """The verdict and its reason (see the module docstring); ``combined``: from :func:`_fit_challengers`."""
-    named = [f for f in fits if f.significant and f.plausible]
+    named = [f for f in fits if f.nameable]
     if named:
         lowest = min(named, key=lambda f: f.bic)
         leader = _leader(named, alpha)
