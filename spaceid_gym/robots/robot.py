@@ -28,7 +28,7 @@ _SUPPORTED_JOINTS = {"revolute", "fixed"}
 
 
 def available_robots() -> list[str]:
-    """Names of the robots shipped with the package (``paper6``, ``quick3``, ...)."""
+    """Names of the robots shipped with the package (``orbit7``, ``paper6``, ``quick3``), sorted."""
     files = resources.files("spaceid_gym.robots")
     return sorted(p.name[: -len(".urdf")] for p in files.iterdir() if p.name.endswith(".urdf"))
 
@@ -97,6 +97,21 @@ class Robot:
 
 def load_robot(spec: str | Path) -> Robot:
     """Load a shipped robot by name (see :func:`available_robots`) or a URDF file by path.
+
+    Shipped robots (each URDF's header comment gives its full design):
+
+    * ``paper6``: the source paper's robot, a 550 kg base (full tank) and a 6-joint arm of 60 kg
+      with axes along its links' x, y or z axes.
+    * ``quick3``: a 120 kg base and a 3-joint arm of 10 kg, for fast tests and examples.
+    * ``orbit7``: a different satellite, an 820 kg base (full tank; box 2.2 x 1.9 x 2.4 m, CoM
+      (-0.054, 0.025, -0.066) m, principal moments 459, 533, 605 kg m^2) whose 215 kg propellant
+      tank (205 kg usable) sits at bf = (-0.266, 0.155, -0.354) m from the full-tank CoM, and a
+      7-joint arm of 79 kg (links of 5-19 kg) whose joint axes are tilted 12-28 deg off their
+      parent link's axes: consecutive axes are 52-74 deg apart, none parallel or orthogonal.
+
+    The tank position and the fuel consumed are not part of a robot: they are the fuel model's
+    unknowns (:mod:`spaceid_gym.physics.fuel`), drawn per satellite by
+    :class:`~spaceid_gym.sim.mission.FuelSchedule` (usable fuel 25 % of the wet base mass) unless given.
 
     Raises:
         SpaceIdInputError: unknown name, missing file, malformed XML, a link without
