@@ -1,22 +1,39 @@
 # Two commands do all the set-up (a virtualenv in .venv, installed on first use):
 #   make demo   - the demonstration of the whole loop on the built-in robot
 #   make test   - the test suite
+# The virtualenv is installed from requirements.lock: the exact versions (and hashes) of every
+# package of the [all] extra that the tests last passed with; the project itself goes in after it
+# with --no-deps. After a change to the dependencies in pyproject.toml:
+#   make lock   - regenerate requirements.lock (keeps the current pins where it can; to move
+#                 everything to the newest allowed versions: make lock LOCK_ARGS=--upgrade)
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint bench install
+LOCK := requirements.lock
+LOCK_ARGS ?=
 
-$(STAMP): pyproject.toml
+.PHONY: demo test lint bench install lock
+
+# torch in the lock is the CPU build, torch==2.13.0+cpu, from the local wheel in /opt/wheels (the
+# --find-links line and the hash in the lock are that file's): any other torch spec pulls several
+# GB of CUDA packages. The setuptools of the lock builds the editable install (no build isolation).
+$(STAMP): pyproject.toml $(LOCK)
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/pip install --quiet --upgrade pip
-	# the CPU build of torch first: any other torch spec pulls several GB of CUDA packages
-	$(BIN)/pip install --quiet torch==2.13.0
-	$(BIN)/pip install --quiet -e ".[all]"
+	$(BIN)/pip install --quiet --require-hashes -r $(LOCK)
+	$(BIN)/pip install --quiet --no-deps --no-build-isolation -e .
 	touch $(STAMP)
 
 install: $(STAMP)
+
+# Python 3.11; the project itself is left out of the lock (--unsafe-package), pip and setuptools are pinned
+lock: $(STAMP)
+	CUSTOM_COMPILE_COMMAND="make lock" $(BIN)/pip-compile --quiet --extra=all --strip-extras \
+	  --generate-hashes --no-allow-unsafe --unsafe-package=spaceid-gym --no-emit-index-url \
+	  $(LOCK_ARGS) --output-file=$(LOCK) pyproject.toml
+	@! grep -iE '^(nvidia|cuda|triton)' $(LOCK) || { echo "make lock: CUDA packages in $(LOCK)"; exit 1; }
+	@grep -q '^torch==2.13.0+cpu ' $(LOCK) || { echo "make lock: torch is not the local CPU build"; exit 1; }
 
 demo: $(STAMP)
 	$(BIN)/spaceid demo --out demo-output
