@@ -76,7 +76,9 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     | 2n .. 2n+2       | base angular rate, base body frame (gyro)     | rad/s |
     | 2n+3 .. 2n+6     | base attitude quaternion w, x, y, z (base to inertial) | - |
 
-    The true parameters are never in the observation.
+    The attitude is what the sensors' attitude source gives (``SensorModel.attitude_source``:
+    star tracker, exact, on-board filter), and zeros when they measure none (``"none"``). The true
+    parameters are never in the observation.
 
     ## Rewards
     ``r = information gain - joint-limit penalty - attitude penalty`` where
@@ -367,9 +369,8 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         return 0.5 * (self._log_det_fisher - before)
 
     def _observation(self, sample: Measurement) -> NDArray[np.float32]:
-        return np.concatenate(
-            (sample.q_rad, sample.dq_rad_s, sample.omega_base_body_rad_s, sample.quat_base_to_inertial_wxyz)
-        ).astype(np.float32)
+        quat = np.zeros(4) if sample.quat_base_to_inertial_wxyz is None else sample.quat_base_to_inertial_wxyz
+        return np.concatenate((sample.q_rad, sample.dq_rad_s, sample.omega_base_body_rad_s, quat)).astype(np.float32)
 
 
 def _sensor_model(sensors: SensorModel | str | None) -> SensorModel:

@@ -43,12 +43,13 @@ class LogRecorder:
         return len(self._t)
 
     def log(self) -> MeasurementLog:
-        """The samples so far as a :class:`~spaceid_gym.log.MeasurementLog`."""
+        """The samples so far as a :class:`~spaceid_gym.log.MeasurementLog` (without attitude if the sensors measure none)."""
         samples = self._samples
+        quats = [m.quat_base_to_inertial_wxyz for m in samples]
         return MeasurementLog(
             t_s=np.array(self._t),
             q_rad=np.array([m.q_rad for m in samples]),
             dq_rad_s=np.array([m.dq_rad_s for m in samples]),
             omega_base_body_rad_s=np.array([m.omega_base_body_rad_s for m in samples]),
-            quat_base_to_inertial_wxyz=np.array([m.quat_base_to_inertial_wxyz for m in samples]),
+            quat_base_to_inertial_wxyz=None if any(q is None for q in quats) else np.array(quats),  # None: no attitude source
         ).validate("simulated log")
