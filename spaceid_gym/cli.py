@@ -7,6 +7,7 @@ traceback. The command sits at the top of the package graph: nothing imports it.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 import time
@@ -23,6 +24,7 @@ from spaceid_gym.arm.cli_commands import (
     add_arm_simulate_arguments,
 )
 from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.sim.sensors import ARCSEC_RAD, ATTITUDE_SOURCES, SensorModel
 
 
 def _vector3(text: str) -> np.ndarray:
@@ -60,7 +62,42 @@ def _parser() -> argparse.ArgumentParser:
     )
     sim.add_argument("--seed", type=int, default=0, help="seed of noise, initial pose, excitation and tank draw")
     sim.add_argument("--rate", type=float, default=50.0, help="sample/control rate, Hz (default 50)")
-    sim.add_argument("--noise-free", action="store_true", help="exact measurements")
+    sim.add_argument(
+        "--noise-free",
+        action="store_true",
+        help="exact measurements (no noise whatever --noise-scale and --star-tracker-arcsec; --attitude still applies)",
+    )
+    sim.add_argument(
+        "--attitude",
+        choices=ATTITUDE_SOURCES,
+        default="star_tracker",
+        help="what the log's attitude columns hold: star_tracker (default; white noise of --star-tracker-arcsec per axis), "
+        "exact (the true attitude), fused (an on-board filter of the noisy gyro and star tracker, run sample by sample: "
+        "its error is correlated in time), none (no quaternion columns)",
+    )
+    sim.add_argument(
+        "--star-tracker-arcsec",
+        type=float,
+        default=5.0,
+        metavar="ARCSEC",
+        help="star-tracker noise per axis, arcsec (default 5; e.g. 1 to 20); used by --attitude star_tracker and fused",
+    )
+    sim.add_argument(
+        "--noise-scale",
+        type=float,
+        default=1.0,
+        metavar="FACTOR",
+        help="factor > 0 on every sensor noise std: gyro, joint encoders, joint rates, star tracker "
+        "(default 1; e.g. 0.3 to 3); not on a hidden gyro bias or scale factor",
+    )
+    sim.add_argument(
+        "--attitude-time-constant",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="correction time constant of the fused attitude filter, s (default: the steady-state Kalman gain of "
+        "the gyro and star-tracker noise, 0.17 s with the default sensors at 50 Hz)",
+    )
     sim.add_argument(
         "--hidden-effects",
         default=None,
@@ -200,10 +237,10 @@ def _simulate(args: argparse.Namespace) -> None:
     from spaceid_gym.datasets import simulate_episode, write_episode_dataset
     from spaceid_gym.robots import load_robot
     from spaceid_gym.sim.mission import FuelSchedule
-    from spaceid_gym.sim.sensors import SensorModel
 
     if not (np.isfinite(args.rate) and args.rate > 0):
         raise SpaceIdInputError(f"--rate: expected a positive rate in Hz, got {args.rate!r}")
+    sensors = _sensor_model(args)
     robot = load_robot(args.robot)
     tank = (
         args.tank
@@ -219,7 +256,7 @@ def _simulate(args: argparse.Namespace) -> None:
         tank_position_m=tank,
         excitation=excitation,
         seed=args.seed,
-        sensors=SensorModel.noise_free() if args.noise_free else None,
+        sensors=sensors,
         control_period_s=1.0 / args.rate,
         hidden_effects=args.hidden_effects,
     )
@@ -231,6 +268,31 @@ def _simulate(args: argparse.Namespace) -> None:
         f"{time.perf_counter() - start:.2f} s wall): base mass {truth['base_mass_kg']:.2f} kg, "
         f"fuel consumed {truth['fuel_consumed_kg']:.2f} kg, tank {json.dumps([round(x, 4) for x in truth['tank_position_m']])} m"
         + (f", hidden effects: {effects}" if effects else "")
+        + (f", attitude: {args.attitude}" if args.attitude != "star_tracker" else "")
+    )
+
+
+def _sensor_model(args: argparse.Namespace) -> SensorModel:
+    """The sensors ``spaceid simulate`` asks for; a bad value of an option raises naming it.
+
+    Options: --noise-free, --attitude, --star-tracker-arcsec, --noise-scale, --attitude-time-constant.
+    """
+    if not (np.isfinite(args.star_tracker_arcsec) and args.star_tracker_arcsec >= 0.0):
+        raise SpaceIdInputError(
+            f"--star-tracker-arcsec: expected a finite number of arcseconds >= 0, got {args.star_tracker_arcsec!r}"
+        )
+    if not (np.isfinite(args.noise_scale) and args.noise_scale > 0.0):
+        raise SpaceIdInputError(f"--noise-scale: expected a finite factor > 0, got {args.noise_scale!r}")
+    source, tau = args.attitude, args.attitude_time_constant
+    if tau is not None and not (np.isfinite(tau) and tau > 0.0):
+        raise SpaceIdInputError(f"--attitude-time-constant: expected a finite number of seconds > 0, got {tau!r}")
+    if args.noise_free:
+        return dataclasses.replace(SensorModel.noise_free(), attitude_source=source, attitude_filter_time_constant_s=tau)
+    return SensorModel(
+        attitude_noise_rad=args.star_tracker_arcsec * ARCSEC_RAD,
+        noise_scale=args.noise_scale,
+        attitude_source=source,
+        attitude_filter_time_constant_s=tau,
     )
 
 
