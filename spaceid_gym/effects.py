@@ -20,7 +20,20 @@ Catalogue (field names, frames and units)
   spring-mass-damper (a point mass) at the tank position (full-tank CoM + ``bf``, base frame). The
   slosh mass is part of the remaining liquid, taken out of the rigid base at the tank, so at rest
   the mass distribution is the rigid one. Spring ``k = m_s (2 pi f)^2``, damper
-  ``c = 2 zeta m_s (2 pi f)``. A zero slosh mass (empty tank) adds no body.
+  ``c = 2 zeta m_s (2 pi f)``. A zero slosh mass (empty tank) adds no body. ``slosh_model`` chooses
+  the equivalent mechanical model of the first lateral mode (Abramson, NASA SP-106, 1966, ch. 6):
+  ``"spring"`` (the default, also when unset) is the spring-mass above; ``"pendulum"`` is the point
+  mass on a massless rod of length ``slosh_length_m`` (default 0.3 m) hinged by a universal joint at
+  ``tank point - L a``, ``a = slosh_axis`` (unit vector, base frame, default base +z), so that at
+  rest the mass sits at the tank point as in the spring model. In free fall there is no gravity to
+  pull the pendulum back; the settled liquid's restoring effect (a small residual acceleration,
+  surface tension) is a torsional spring-damper on each hinge angle,
+  ``k_theta = m_s L^2 (2 pi f)^2`` (N m/rad), ``c_theta = 2 zeta m_s L^2 (2 pi f)`` (N m s/rad): for
+  small angles this is exactly a pendulum under the effective acceleration ``g_eff = L (2 pi f)^2``
+  along ``a`` (``f = sqrt(g_eff / L) / (2 pi)``), and its lateral force on the mass is the spring
+  model's ``k``, ``c``. The two models differ beyond the small-angle limit and in the rod: the
+  pendulum mass cannot move along ``a``. ``slosh_length_m`` and ``slosh_axis`` are only for the
+  pendulum (they default when it is chosen, so truth.json always holds them).
 * ``delay``: ``delay_s`` >= 0: the gyro stream lags the encoders, ``omega_meas(t_k) = omega(t_k - delay_s)``
   (any real delay, not only whole samples).
 * ``external_torque``: ``external_torque_Nm`` (3,) constant torque and ``external_torque_rate_Nm_s``
@@ -58,7 +71,16 @@ slosh             mass, kg (30 % of the       first lateral slosh mode's equival
                                               Behavior of Liquids in Moving Containers", SwRI, 2000);
                                               defaults 30 %, 0.3 Hz, 0.05. The remaining liquid is the
                                               usable fuel (``FuelSchedule().usable_fraction`` of the
-                                              full-tank base mass) minus the fuel consumed.
+                                              full-tank base mass) minus the fuel consumed. Model: the
+                                              spring-mass by default; :func:`draw_slosh` also draws the
+                                              pendulum (Abramson, NASA SP-106, ch. 6; the other
+                                              standard equivalent model of lateral slosh), default rod
+                                              0.3 m (a 37 kg pendulum of 0.3 m with a period of about
+                                              15 s is another simulator's case), and the period
+                                              log-uniform over 2-50 s on request
+                                              (:data:`SLOSH_PERIOD_RANGE_S`: the low frequencies of
+                                              large, partly filled tanks under a small residual
+                                              acceleration).
 delay             s (0.02)                    sensor processing and data-bus latency between the gyro
                                               and the joint encoders, 10-40 ms; one sample at 50 Hz.
 external_torque   ``|tau0|``, N m (5e-4)      gravity gradient in LEO, ``3 n^2 c x (I c)``, at most
@@ -76,8 +98,10 @@ small it acts like ``initial_momentum`` (fixed in the inertial frame), which is 
 Spec strings (:func:`parse_hidden_effects`, used by the env and ``spaceid simulate
 --hidden-effects``): comma-separated effect names, each optionally followed by ``[key=value,...]``
 with ``magnitude`` or the effect's field names; vector and matrix values separate their numbers with
-``;`` (row-major for the 3x3 matrix), e.g. ``"slosh,delay[delay_s=0.03],gyro_bias[magnitude=1e-4]"``
-or ``"external_torque[external_torque_Nm=1e-4;0;0,external_torque_rate_Nm_s=0;0;0]"``.
+``;`` (row-major for the 3x3 matrix), and ``slosh_model`` is a word, e.g.
+``"slosh,delay[delay_s=0.03],gyro_bias[magnitude=1e-4]"``,
+``"external_torque[external_torque_Nm=1e-4;0;0,external_torque_rate_Nm_s=0;0;0]"`` or
+``"slosh[slosh_model=pendulum,slosh_length_m=0.3,slosh_axis=0;0;1,slosh_frequency_hz=0.067,magnitude=37]"``.
 """
 
 from __future__ import annotations
@@ -106,7 +130,7 @@ EFFECT_FIELDS: dict[str, tuple[str, ...]] = {
     "initial_momentum": ("initial_momentum_Nms",),
     "gyro_bias": ("gyro_bias_rad_s",),
     "payload": ("payload_params10",),
-    "slosh": ("slosh_mass_kg", "slosh_frequency_hz", "slosh_damping_ratio"),
+    "slosh": ("slosh_mass_kg", "slosh_frequency_hz", "slosh_damping_ratio", "slosh_model", "slosh_length_m", "slosh_axis"),
     "delay": ("delay_s",),
     "external_torque": ("external_torque_Nm", "external_torque_rate_Nm_s"),
     "gyro_scale": ("gyro_scale_misalignment",),
@@ -140,6 +164,19 @@ MAGNITUDE_UNITS: dict[str, str] = {
 
 SLOSH_FREQUENCY_HZ = 0.3
 SLOSH_DAMPING_RATIO = 0.05
+#: the equivalent mechanical models of the first lateral slosh mode (``slosh_model``; unset means the first)
+SLOSH_MODELS = ("spring", "pendulum")
+#: the pendulum's default rod length, m
+SLOSH_PENDULUM_LENGTH_M = 0.3
+#: the pendulum's default axis (hinge to mass at rest), base frame: the base +z axis
+SLOSH_PENDULUM_AXIS = (0.0, 0.0, 1.0)
+#: the slosh periods :func:`draw_slosh` draws from (log-uniform), s
+SLOSH_PERIOD_RANGE_S = (2.0, 50.0)
+#: accepted slosh frequencies ``(0, max]`` (Hz) and damping ratios ``[0, max)``
+SLOSH_MAX_FREQUENCY_HZ = 5.0
+SLOSH_MAX_DAMPING_RATIO = 2.0
+#: how far from 1 the norm of ``slosh_axis`` may be
+SLOSH_AXIS_NORM_TOLERANCE = 1e-9
 PAYLOAD_BOX_M = (0.3, 0.2, 0.2)
 PAYLOAD_DISTANCE_M = 0.15
 
@@ -152,6 +189,8 @@ _SHAPES: dict[str, tuple[int, ...]] = {
     "slosh_mass_kg": (),
     "slosh_frequency_hz": (),
     "slosh_damping_ratio": (),
+    "slosh_length_m": (),
+    "slosh_axis": (3,),
     "delay_s": (),
     "external_torque_Nm": (3,),
     "external_torque_rate_Nm_s": (3,),
@@ -172,7 +211,11 @@ class HiddenEffects:
         gyro_scale_misalignment: (3, 3) ``E`` in ``omega_meas = (I + E) omega + bias``.
         payload_params10: (10,) payload inertial parameters about the last joint frame's origin, in that frame.
         slosh_mass_kg, slosh_frequency_hz, slosh_damping_ratio: slosh mass (>= 0), natural frequency
-            (> 0, Hz) and damping ratio (>= 0); all three or none.
+            (in (0, 5] Hz) and damping ratio (in [0, 2)); all three or none.
+        slosh_model: ``"spring"`` or ``"pendulum"`` (:data:`SLOSH_MODELS`); ``None`` (unset) is the spring.
+        slosh_length_m: the pendulum's rod length (> 0, m); pendulum only (default 0.3 m).
+        slosh_axis: (3,) unit vector from the hinge to the mass at rest, base frame; pendulum only
+            (default the base +z axis).
         delay_s: gyro delay behind the encoders, s, >= 0.
         external_torque_Nm: (3,) constant external torque, inertial frame, N m.
         external_torque_rate_Nm_s: (3,) its linear drift, inertial frame, N m/s.
@@ -185,6 +228,9 @@ class HiddenEffects:
     slosh_mass_kg: float | None = None
     slosh_frequency_hz: float | None = None
     slosh_damping_ratio: float | None = None
+    slosh_model: str | None = None
+    slosh_length_m: float | None = None
+    slosh_axis: tuple[float, ...] | None = None
     delay_s: float | None = None
     external_torque_Nm: tuple[float, ...] | None = None
     external_torque_rate_Nm_s: tuple[float, ...] | None = None
@@ -194,21 +240,66 @@ class HiddenEffects:
             value = getattr(self, name)
             if value is not None:
                 object.__setattr__(self, name, _checked(name, value, shape))
-        slosh = [getattr(self, f) is None for f in EFFECT_FIELDS["slosh"]]
-        if any(slosh) and not all(slosh):
-            raise SpaceIdInputError(
-                "hidden effect 'slosh': expected slosh_mass_kg, slosh_frequency_hz and slosh_damping_ratio together"
-            )
-        if self.slosh_mass_kg is not None:
-            _require("slosh_mass_kg", self.slosh_mass_kg, self.slosh_mass_kg >= 0.0, ">= 0 kg")
-            _require("slosh_frequency_hz", self.slosh_frequency_hz, float(self.slosh_frequency_hz or 0.0) > 0.0, "> 0 Hz")
-            _require("slosh_damping_ratio", self.slosh_damping_ratio, float(self.slosh_damping_ratio or 0.0) >= 0.0, ">= 0")
+        self._check_slosh()
         if self.delay_s is not None:
             _require("delay_s", self.delay_s, self.delay_s >= 0.0, ">= 0 s")
         if self.payload_params10 is not None:
             mass = self.payload_params10[0]
             _require("payload_params10", self.payload_params10, mass > 0.0, "a mass (first entry) > 0 kg")
             RigidBodyInertia.from_params10(np.array(self.payload_params10)).validate("hidden effect 'payload' (payload_params10)")
+
+    def _check_slosh(self) -> None:
+        """Validate the slosh fields; a pendulum gets its default rod length and axis when they are unset."""
+        unset = [getattr(self, f) is None for f in _SLOSH_REQUIRED]
+        if any(unset) and not all(unset):
+            raise SpaceIdInputError(
+                "hidden effect 'slosh': expected slosh_mass_kg, slosh_frequency_hz and slosh_damping_ratio together"
+            )
+        if all(unset):
+            given = [f for f in EFFECT_FIELDS["slosh"] if getattr(self, f) is not None]
+            if given:
+                raise SpaceIdInputError(
+                    f"hidden effect 'slosh': {', '.join(given)} given without slosh_mass_kg, slosh_frequency_hz and "
+                    "slosh_damping_ratio"
+                )
+            return
+        frequency, damping = float(self.slosh_frequency_hz or 0.0), float(self.slosh_damping_ratio or 0.0)
+        _require("slosh_mass_kg", self.slosh_mass_kg, float(self.slosh_mass_kg or 0.0) >= 0.0, ">= 0 kg")
+        _require(
+            "slosh_frequency_hz",
+            self.slosh_frequency_hz,
+            0.0 < frequency <= SLOSH_MAX_FREQUENCY_HZ,
+            f"> 0 and <= {SLOSH_MAX_FREQUENCY_HZ:g} Hz",
+        )
+        _require(
+            "slosh_damping_ratio",
+            self.slosh_damping_ratio,
+            0.0 <= damping < SLOSH_MAX_DAMPING_RATIO,
+            f">= 0 and < {SLOSH_MAX_DAMPING_RATIO:g}",
+        )
+        model = self.slosh_model
+        _require(
+            "slosh_model",
+            model,
+            model is None or (isinstance(model, str) and model in SLOSH_MODELS),
+            f"one of {', '.join(map(repr, SLOSH_MODELS))}",
+        )
+        if model != "pendulum":
+            for field in ("slosh_length_m", "slosh_axis"):
+                _require(field, getattr(self, field), getattr(self, field) is None, "no value unless slosh_model is 'pendulum'")
+            return
+        if self.slosh_length_m is None:
+            object.__setattr__(self, "slosh_length_m", SLOSH_PENDULUM_LENGTH_M)
+        if self.slosh_axis is None:
+            object.__setattr__(self, "slosh_axis", SLOSH_PENDULUM_AXIS)
+        _require("slosh_length_m", self.slosh_length_m, float(self.slosh_length_m or 0.0) > 0.0, "> 0 m")
+        norm = float(np.linalg.norm(self.slosh_axis))
+        _require(
+            "slosh_axis",
+            self.slosh_axis,
+            abs(norm - 1.0) <= SLOSH_AXIS_NORM_TOLERANCE,
+            f"a unit vector (base frame; norm 1 within {SLOSH_AXIS_NORM_TOLERANCE:g}, this one {norm:.12g})",
+        )
 
     # ------------------------------------------------------------------ views
     @property
@@ -227,9 +318,9 @@ class HiddenEffects:
 
     # ------------------------------------------------------------------ serialisation
     def to_dict(self) -> dict[str, Any]:
-        """The set fields as plain JSON values (lists and floats); the ``hidden_effects`` of truth.json."""
+        """The set fields as plain JSON values (lists, floats and the word ``slosh_model``); the ``hidden_effects`` of truth.json."""
         out: dict[str, Any] = {}
-        for field in _SHAPES:
+        for field in _FIELDS:
             value = getattr(self, field)
             if field == "gyro_scale_misalignment" and value is not None:
                 out[field] = [list(row) for row in value]
@@ -242,9 +333,9 @@ class HiddenEffects:
         """Inverse of :meth:`to_dict`; unknown keys raise :class:`SpaceIdInputError` naming ``where``."""
         if not isinstance(data, dict):
             raise SpaceIdInputError(f"{where}: expected an object of effect fields, got {type(data).__name__}")
-        unknown = sorted(set(data) - set(_SHAPES))
+        unknown = sorted(set(data) - set(_FIELDS))
         if unknown:
-            raise SpaceIdInputError(f"{where}: unknown keys {unknown}; expected some of {', '.join(_SHAPES)}")
+            raise SpaceIdInputError(f"{where}: unknown keys {unknown}; expected some of {', '.join(_FIELDS)}")
         return cls(**data)
 
     def combine(self, other: HiddenEffects) -> HiddenEffects:
@@ -257,7 +348,11 @@ class HiddenEffects:
 
     # ------------------------------------------------------------------ derived physics
     def slosh_stiffness_damping(self) -> tuple[float, float]:
-        """Spring ``k = m (2 pi f)^2`` (N/m) and damper ``c = 2 zeta m (2 pi f)`` (N s/m) of the slosh mass."""
+        """Spring ``k = m (2 pi f)^2`` (N/m) and damper ``c = 2 zeta m (2 pi f)`` (N s/m) of the slosh mass.
+
+        For the pendulum these are the lateral stiffness and damping at the mass; its torsional spring-damper at
+        the hinge is ``k L^2`` (N m/rad) and ``c L^2`` (N m s/rad).
+        """
         if self.slosh_mass_kg is None:
             raise SpaceIdInputError("hidden effect 'slosh' is not set")
         omega = 2.0 * math.pi * float(self.slosh_frequency_hz or 0.0)
@@ -286,6 +381,12 @@ def _checked(name: str, value: Any, shape: tuple[int, ...]) -> Any:
     if len(shape) == 1:
         return tuple(float(x) for x in array)
     return tuple(tuple(float(x) for x in row) for row in array)
+
+
+#: every :class:`HiddenEffects` field, in declaration order
+_FIELDS = tuple(f.name for f in dataclasses.fields(HiddenEffects))
+#: the slosh fields that come together (the others are optional)
+_SLOSH_REQUIRED = EFFECT_FIELDS["slosh"][:3]
 
 
 def _require(name: str, value: Any, ok: bool, expected: str) -> None:
@@ -355,14 +456,7 @@ def draw_effect(
             external_torque_rate_Nm_s=2.0 * ORBITAL_RATE_RAD_S * size * _unit_vector(rng),
         )
     if name == "slosh":
-        liquid = remaining_liquid_kg(robot, fuel_consumed_kg)
-        mass = DEFAULT_MAGNITUDES["slosh"] * liquid if magnitude is None else size
-        if mass > liquid:
-            raise SpaceIdInputError(
-                f"hidden effect 'slosh': magnitude {mass:g} kg exceeds the remaining liquid {liquid:g} kg "
-                f"(usable fuel minus the {fuel_consumed_kg:g} kg consumed)"
-            )
-        return HiddenEffects(slosh_mass_kg=mass, slosh_frequency_hz=SLOSH_FREQUENCY_HZ, slosh_damping_ratio=SLOSH_DAMPING_RATIO)
+        return draw_slosh(rng, robot, fuel_consumed_kg, None if magnitude is None else size)
     # payload: a uniform box, random orientation, CoM at PAYLOAD_DISTANCE_M in a random direction
     if size <= 0.0:
         raise SpaceIdInputError(f"hidden effect 'payload': magnitude (mass) must be > 0 kg, got {magnitude!r}")
@@ -371,6 +465,58 @@ def draw_effect(
     rot = _random_rotation(rng)
     com = PAYLOAD_DISTANCE_M * _unit_vector(rng)
     return HiddenEffects(payload_params10=RigidBodyInertia(size, com, rot @ box @ rot.T).to_params10())
+
+
+def draw_slosh(
+    rng: np.random.Generator,
+    robot: Robot,
+    fuel_consumed_kg: float,
+    mass_kg: float | None = None,
+    model: str = "spring",
+    period_s: float | tuple[float, float] | None = None,
+    length_m: float = SLOSH_PENDULUM_LENGTH_M,
+    axis_base: tuple[float, float, float] = SLOSH_PENDULUM_AXIS,
+) -> HiddenEffects:
+    """A slosh effect: its mass, model and period (:func:`draw_effect` ``("slosh", ...)`` with the defaults).
+
+    Args:
+        rng: the generator a drawn period comes from (nothing is drawn with a fixed or default period).
+        robot, fuel_consumed_kg: set the remaining liquid (:func:`remaining_liquid_kg`), kg.
+        mass_kg: the slosh mass, kg, at most the remaining liquid; default 30 % of it.
+        model: ``"spring"`` or ``"pendulum"`` (:data:`SLOSH_MODELS`); the spring leaves ``slosh_model`` unset.
+        period_s: the natural period, s: a number, a ``(low, high)`` range to draw it from log-uniformly (e.g.
+            :data:`SLOSH_PERIOD_RANGE_S`), or ``None`` for :data:`SLOSH_FREQUENCY_HZ`.
+        length_m, axis_base: the pendulum's rod length (m) and axis (unit vector, base frame); pendulum only.
+
+    Returns:
+        A :class:`HiddenEffects` with only ``slosh`` set, damping ratio :data:`SLOSH_DAMPING_RATIO`.
+    """
+    if model not in SLOSH_MODELS:
+        raise SpaceIdInputError(f"hidden effect 'slosh': model {model!r} unknown; expected one of {', '.join(SLOSH_MODELS)}")
+    liquid = remaining_liquid_kg(robot, fuel_consumed_kg)
+    mass = DEFAULT_MAGNITUDES["slosh"] * liquid if mass_kg is None else float(mass_kg)
+    if not (math.isfinite(mass) and mass >= 0.0):
+        raise SpaceIdInputError(f"hidden effect 'slosh': mass expected a finite number >= 0 kg, got {mass_kg!r}")
+    if mass > liquid:
+        raise SpaceIdInputError(
+            f"hidden effect 'slosh': magnitude {mass:g} kg exceeds the remaining liquid {liquid:g} kg "
+            f"(usable fuel minus the {fuel_consumed_kg:g} kg consumed)"
+        )
+    if period_s is None:
+        frequency = SLOSH_FREQUENCY_HZ
+    elif isinstance(period_s, tuple | list):
+        low, high = (float(x) for x in period_s)
+        if not 0.0 < low <= high < math.inf:
+            raise SpaceIdInputError(f"hidden effect 'slosh': period range expected 0 < low <= high s, got {period_s!r}")
+        frequency = 1.0 / math.exp(rng.uniform(math.log(low), math.log(high)))
+    else:
+        if not (math.isfinite(period_s) and period_s > 0.0):
+            raise SpaceIdInputError(f"hidden effect 'slosh': period expected > 0 s, got {period_s!r}")
+        frequency = 1.0 / float(period_s)
+    pendulum: dict[str, Any] = {}
+    if model == "pendulum":
+        pendulum = {"slosh_model": model, "slosh_length_m": length_m, "slosh_axis": axis_base}
+    return HiddenEffects(slosh_mass_kg=mass, slosh_frequency_hz=frequency, slosh_damping_ratio=SLOSH_DAMPING_RATIO, **pendulum)
 
 
 # ---------------------------------------------------------------------- spec strings
@@ -389,7 +535,13 @@ def _split_top_level(spec: str) -> list[str]:
     return items
 
 
-def _parse_value(spec: str, name: str, key: str, text: str) -> float | FloatArray:
+def _parse_value(spec: str, name: str, key: str, text: str) -> float | str | FloatArray:
+    if key == "slosh_model":
+        if text not in SLOSH_MODELS:
+            raise SpaceIdInputError(
+                f"hidden effects '{spec}': {name}[{key}=...] expected one of {', '.join(SLOSH_MODELS)}, got {text!r}"
+            )
+        return text
     try:
         values = [float(x) for x in text.split(";")]
     except ValueError:

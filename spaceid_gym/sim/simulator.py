@@ -26,9 +26,16 @@ Hidden effects (:class:`~spaceid_gym.effects.HiddenEffects`)
   ``L(t) = L0 + tau0 t + tau1 t^2 / 2`` (linear momentum unchanged), and every RKMK4 stage uses
   the momentum at its own time.
 * ``payload``: the dynamics run on :meth:`Robot.with_payload`.
-* ``slosh``: a point mass ``m_s`` on three prismatic joints along the base axes at the tank point
-  (appended to the pinocchio model after the arm joints; ``m_s`` is taken out of the rigid base
-  there), pulled back by the spring-damper ``-k x - c dx``. The base twist still follows from the
+* ``slosh``: a point mass ``m_s`` whose rest point is the tank point (``m_s`` is taken out of the
+  rigid base there), on joints appended to the pinocchio model after the arm joints. The spring
+  model (``slosh_model`` unset or ``"spring"``): three prismatic joints along the base axes at the
+  tank point, coordinates ``x`` the displacement (m, base axes), pulled back by the spring-damper
+  ``-k x - c dx``. The pendulum (``"pendulum"``): a universal joint at the hinge ``tank - L a``, two
+  revolute joints about ``e1`` and then the turned ``e2`` (``(e1, e2, a)`` right-handed, base frame),
+  the mass at ``L`` along the rod, which is ``a`` at zero angles; coordinates ``x`` the two angles
+  (rad), pulled back by the torsional spring-damper ``-k L^2 x - c L^2 dx`` (a pendulum under the
+  effective acceleration ``L (2 pi f)^2`` for small angles; the universal joint's gimbal lock at
+  90 deg is far from the small slosh angles). Either way the base twist still follows from the
   momentum, now with the slosh rates; the slosh accelerations follow from the equations of
   motion (CRBA + nonlinear effects) of the base and slosh coordinates with the arm accelerations
   known from the servo, the base wrench zero (or the external torque). The attitude and the slosh
@@ -73,7 +80,10 @@ class FreeFloatingState:
         v_base_body: base twist ``[v_lin; omega]`` in base axes (6,), m/s and rad/s.
         composite_inertia: the whole robot's spatial inertia in the base frame (``H_bb``).
         slosh_m, slosh_rate_m_s: slosh mass displacement from its rest point and its rate (3,),
-            base axes, m and m/s; ``None`` without slosh. Truth only: never measured.
+            base axes, m and m/s; ``None`` without slosh. Truth only: never measured. For the spring
+            model they are the slosh joint coordinates.
+        slosh_angles_rad, slosh_angle_rates_rad_s: the pendulum's two hinge angles and their rates
+            (2,), rad and rad/s (its joint coordinates); ``None`` otherwise.
     """
 
     t_s: float
@@ -86,6 +96,18 @@ class FreeFloatingState:
     composite_inertia: pin.Inertia
     slosh_m: FloatArray | None = None
     slosh_rate_m_s: FloatArray | None = None
+    slosh_angles_rad: FloatArray | None = None
+    slosh_angle_rates_rad_s: FloatArray | None = None
+
+    @property
+    def slosh_coordinates(self) -> tuple[FloatArray, FloatArray] | None:
+        """The slosh joints' coordinates and rates: ``(slosh_m, slosh_rate_m_s)`` for the spring model, the
+        hinge angles and their rates for the pendulum; ``None`` without slosh."""
+        if self.slosh_angles_rad is not None and self.slosh_angle_rates_rad_s is not None:
+            return self.slosh_angles_rad, self.slosh_angle_rates_rad_s
+        if self.slosh_m is not None and self.slosh_rate_m_s is not None:
+            return self.slosh_m, self.slosh_rate_m_s
+        return None
 
     @property
     def omega_base_body(self) -> FloatArray:
@@ -98,27 +120,76 @@ class FreeFloatingState:
         return quat_from_matrix(self.rot_wb)
 
     def pinocchio_configuration(self) -> FloatArray:
-        """pinocchio ``q``: ``[p (3), quat (x, y, z, w), q_arm]`` (+ ``slosh_m`` with slosh)."""
+        """pinocchio ``q``: ``[p (3), quat (x, y, z, w), q_arm]`` (+ the slosh coordinates with slosh)."""
         w, x, y, z = self.quat_wb
-        if self.slosh_m is None:
+        slosh = self.slosh_coordinates
+        if slosh is None:
             return np.concatenate((self.p_wb_m, [x, y, z, w], self.q_rad))
-        return np.concatenate((self.p_wb_m, [x, y, z, w], self.q_rad, self.slosh_m))
+        return np.concatenate((self.p_wb_m, [x, y, z, w], self.q_rad, slosh[0]))
 
     def pinocchio_velocity(self) -> FloatArray:
-        """pinocchio ``v``: ``[v_lin_body, omega_body, dq]`` (+ ``slosh_rate_m_s`` with slosh)."""
-        if self.slosh_rate_m_s is None:
+        """pinocchio ``v``: ``[v_lin_body, omega_body, dq]`` (+ the slosh rates with slosh)."""
+        slosh = self.slosh_coordinates
+        if slosh is None:
             return np.concatenate((self.v_base_body, self.dq_rad_s))
-        return np.concatenate((self.v_base_body, self.dq_rad_s, self.slosh_rate_m_s))
+        return np.concatenate((self.v_base_body, self.dq_rad_s, slosh[1]))
 
 
 @dataclass(frozen=True)
 class SloshBody:
-    """The slosh point mass: ``m`` (kg), spring ``k`` (N/m), damper ``c`` (N s/m), rest point (3,) in the base frame (m)."""
+    """The slosh point mass and its restoring law.
+
+    Attributes:
+        mass_kg: the slosh mass ``m``, kg.
+        stiffness_n_m, damping_n_s_m: the spring ``k`` (N/m) and damper ``c`` (N s/m) at the mass; for the
+            pendulum, its lateral equivalent (the torsional ones are :meth:`joint_stiffness_damping`).
+        anchor_m: the rest point of the mass (the tank point), base frame (3,), m.
+        length_m: the pendulum's rod length ``L``, m; ``None`` for the spring model.
+        rot_base_hinge: the pendulum's hinge frame ``[e1 e2 a]`` in the base frame (3, 3): the joints turn
+            about ``e1`` and then the turned ``e2``, the rod is ``a`` at zero angles; ``None`` for the spring model.
+    """
 
     mass_kg: float
     stiffness_n_m: float
     damping_n_s_m: float
     anchor_m: FloatArray
+    length_m: float | None = None
+    rot_base_hinge: FloatArray | None = None
+
+    @property
+    def is_pendulum(self) -> bool:
+        """True for the pendulum, False for the spring model."""
+        return self.length_m is not None
+
+    @property
+    def n_coordinates(self) -> int:
+        """The number of slosh joint coordinates: 3 (spring: displacement) or 2 (pendulum: hinge angles)."""
+        return 2 if self.is_pendulum else 3
+
+    @property
+    def hinge_m(self) -> FloatArray:
+        """The pendulum's hinge point, base frame (3,), m: ``anchor - L a``."""
+        assert self.length_m is not None and self.rot_base_hinge is not None
+        return self.anchor_m - self.length_m * self.rot_base_hinge[:, 2]
+
+    def joint_stiffness_damping(self) -> tuple[float, float]:
+        """Stiffness and damping on each slosh joint coordinate: ``(k, c)`` (N/m, N s/m) for the spring model,
+        ``(k L^2, c L^2)`` (N m/rad, N m s/rad) for the pendulum (the same lateral force at the mass, small angles)."""
+        if self.length_m is None:
+            return self.stiffness_n_m, self.damping_n_s_m
+        square = self.length_m * self.length_m
+        return self.stiffness_n_m * square, self.damping_n_s_m * square
+
+    def displacement(self, x: FloatArray, dx: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """The mass's displacement from its rest point and its rate relative to the base (3,), base axes, m and
+        m/s, from the joint coordinates and rates ``x, dx``: themselves for the spring model; for the pendulum the
+        rod ``L Rx(x0) Ry(x1) e_z`` in the hinge frame, minus its rest ``L e_z``."""
+        if self.length_m is None or self.rot_base_hinge is None:
+            return x, dx
+        s0, c0, s1, c1 = np.sin(x[0]), np.cos(x[0]), np.sin(x[1]), np.cos(x[1])
+        rod = np.array([s1, -s0 * c1, c0 * c1 - 1.0])
+        rate = np.array([c1 * dx[1], -c0 * c1 * dx[0] + s0 * s1 * dx[1], -s0 * c1 * dx[0] - c0 * s1 * dx[1]])
+        return self.length_m * (self.rot_base_hinge @ rod), self.length_m * (self.rot_base_hinge @ rate)
 
 
 class FreeFloatingSimulator:
@@ -185,6 +256,7 @@ class FreeFloatingSimulator:
         rot_wb: FloatArray | None = None,
         momentum_world: FloatArray | None = None,
         slosh_m: FloatArray | None = None,
+        slosh_angles_rad: FloatArray | None = None,
     ) -> FreeFloatingState:
         """Start with the joints at rest and the system CoM at the inertial origin.
 
@@ -195,8 +267,10 @@ class FreeFloatingSimulator:
                 N s and N m s; default zero (the paper's assumption) or the ``initial_momentum``
                 effect. A non-zero ``L`` makes the base spin (residual spin, stored wheel momentum).
                 It stays constant unless the ``external_torque`` effect is set.
-            slosh_m: initial slosh displacement from the rest point (3,), base axes, m (with slosh;
-                default zero); the slosh mass starts at rest relative to the base.
+            slosh_m: initial slosh displacement from the rest point (3,), base axes, m (with the spring
+                model; default zero); the slosh mass starts at rest relative to the base.
+            slosh_angles_rad: initial hinge angles (2,), rad (with the pendulum; default zero), the mass at
+                rest relative to the base.
         """
         n = self.robot.n_joints
         q0 = self.robot.home_configuration() if q0_rad is None else np.asarray(q0_rad, dtype=float)
@@ -207,15 +281,16 @@ class FreeFloatingSimulator:
             self.momentum_world = self.effects.momentum_world()
         self._zero_momentum = not self.momentum_world.any()
         if self.slosh is not None:
-            x0 = np.zeros(3) if slosh_m is None else np.asarray(slosh_m, dtype=float)
-            if x0.shape != (3,) or not np.all(np.isfinite(x0)):
-                raise SpaceIdInputError(f"reset: slosh_m expected 3 finite numbers (m, base axes), got {slosh_m!r}")
-            twist, p = self._slosh_kinematics(0.0, rot, x0, np.zeros(3), q0, np.zeros(n))[:2]
+            x0 = _initial_slosh(self.slosh, slosh_m, slosh_angles_rad)
+            rest = np.zeros_like(x0)
+            twist, p = self._slosh_kinematics(0.0, rot, x0, rest, q0, np.zeros(n))[:2]
             composite = self.data.Ycrb[1].copy()
-            self.state = FreeFloatingState(0.0, rot, p, q0.copy(), np.zeros(n), np.zeros(n), twist, composite, x0, np.zeros(3))
+            self.state = self._slosh_state(0.0, rot, p, q0.copy(), np.zeros(n), np.zeros(n), twist, composite, x0, rest)
         else:
-            if slosh_m is not None:
-                raise SpaceIdInputError("reset: slosh_m needs the 'slosh' hidden effect with a slosh mass > 0")
+            if slosh_m is not None or slosh_angles_rad is not None:
+                raise SpaceIdInputError(
+                    "reset: slosh_m and slosh_angles_rad need the 'slosh' hidden effect with a slosh mass > 0"
+                )
             terms = self._base_terms(0.0, q0, np.zeros(n))
             twist = base_twist_at_attitude(rot, self.momentum_world, *terms[1:])
             p = terms[3] - rot @ terms[0].lever
@@ -227,7 +302,8 @@ class FreeFloatingSimulator:
     def base_twist(self, q_rad: FloatArray, dq_rad_s: FloatArray, rot_wb: FloatArray, t_s: float = 0.0) -> FloatArray:
         """Base twist ``[v_lin; omega]`` (base axes) from momentum conservation, shape (6,) (slosh at rest)."""
         if self.slosh is not None:
-            return self._slosh_kinematics(t_s, rot_wb, np.zeros(3), np.zeros(3), q_rad, dq_rad_s)[0]
+            rest = np.zeros(self.slosh.n_coordinates)
+            return self._slosh_kinematics(t_s, rot_wb, rest, rest, q_rad, dq_rad_s)[0]
         return base_twist_at_attitude(rot_wb, self._momentum_at(t_s), *self._base_terms(t_s, q_rad, dq_rad_s)[1:])
 
     def step(self, rate_command_rad_s: FloatArray, dt_s: float) -> FreeFloatingState:
@@ -300,9 +376,9 @@ class FreeFloatingSimulator:
         self, s: FreeFloatingState, u: FloatArray, dt_s: float, cuts: list[float], times: list[float]
     ) -> FreeFloatingState:
         """:meth:`_advance` with the slosh mass: RKMK4 on ``(R, x, dx)`` over each smooth interval."""
-        assert s.slosh_m is not None and s.slosh_rate_m_s is not None
+        assert s.slosh_coordinates is not None
         q_t, dq_t, ddq_t = self.servo.motion(s.q_rad, s.dq_rad_s, u, [0.0, *times])  # row 0: just after the command
-        rot, x, v = s.rot_wb, s.slosh_m, s.slosh_rate_m_s
+        rot, (x, v) = s.rot_wb, s.slosh_coordinates
         rates = self._slosh_rates(s.t_s, rot, x, v, q_t[0], dq_t[0], ddq_t[0])
         for i in range(len(cuts) - 1):
             h = cuts[i + 1] - cuts[i]
@@ -319,12 +395,31 @@ class FreeFloatingSimulator:
             end = 2 * i + 2
             rates = self._slosh_rates(s.t_s + times[end - 1], rot, x, v, q_t[end], dq_t[end], ddq_t[end])
         composite = self.data.Ycrb[1].copy()  # of the last evaluation: the end state
-        return FreeFloatingState(s.t_s + dt_s, rot, rates[2], q_t[-1], dq_t[-1], ddq_t[-1], rates[0], composite, x, v)
+        return self._slosh_state(s.t_s + dt_s, rot, rates[2], q_t[-1], dq_t[-1], ddq_t[-1], rates[0], composite, x, v)
+
+    def _slosh_state(
+        self,
+        t_s: float,
+        rot_wb: FloatArray,
+        p_wb_m: FloatArray,
+        q_rad: FloatArray,
+        dq_rad_s: FloatArray,
+        ddq_rad_s2: FloatArray,
+        twist: FloatArray,
+        composite: pin.Inertia,
+        x: FloatArray,
+        v: FloatArray,
+    ) -> FreeFloatingState:
+        """A state with the slosh joint coordinates ``x`` and rates ``v`` (the pendulum's also as the mass's displacement)."""
+        assert self.slosh is not None
+        displacement, rate = self.slosh.displacement(x, v)
+        angles = (x, v) if self.slosh.is_pendulum else (None, None)
+        return FreeFloatingState(t_s, rot_wb, p_wb_m, q_rad, dq_rad_s, ddq_rad_s2, twist, composite, displacement, rate, *angles)
 
     def _slosh_kinematics(
-        self, t_s: float, rot_wb: FloatArray, x_m: FloatArray, v_m_s: FloatArray, q_rad: FloatArray, dq_rad_s: FloatArray
+        self, t_s: float, rot_wb: FloatArray, x_slosh: FloatArray, dx_slosh: FloatArray, q_rad: FloatArray, dq_rad_s: FloatArray
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """Base twist from the momentum with the slosh mass at ``x`` moving at ``dx``.
+        """Base twist from the momentum with the slosh joints at ``x_slosh`` moving at ``dx_slosh`` (m or rad, 3 or 2).
 
         Leaves the CRBA of the configuration in ``self.data`` (``Ycrb[1]`` is the composite inertia).
 
@@ -333,10 +428,10 @@ class FreeFloatingSimulator:
         n = self.robot.n_joints
         q_full = self._q_full
         q_full[7 : 7 + n] = q_rad
-        q_full[7 + n :] = x_m
+        q_full[7 + n :] = x_slosh
         mass = pin.crba(self.model, self.data, q_full)
         twist, p = slosh_base_twist(
-            mass, self.data.Ycrb[1].lever, self._com_world(t_s), rot_wb, self._momentum_at(t_s), dq_rad_s, v_m_s
+            mass, self.data.Ycrb[1].lever, self._com_world(t_s), rot_wb, self._momentum_at(t_s), dq_rad_s, dx_slosh
         )
         return twist, p, mass
 
@@ -344,24 +439,24 @@ class FreeFloatingSimulator:
         self,
         t_s: float,
         rot_wb: FloatArray,
-        x_m: FloatArray,
-        v_m_s: FloatArray,
+        x_slosh: FloatArray,
+        dx_slosh: FloatArray,
         q_rad: FloatArray,
         dq_rad_s: FloatArray,
         ddq_rad_s2: FloatArray,
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """Base twist (6,), slosh acceleration (3,) and base position ``p_wb`` (3,) at one instant.
+        """Base twist (6,), slosh joint accelerations (3 or 2) and base position ``p_wb`` (3,) at one instant.
 
         Solves the base and slosh rows of ``M a + nle = tau`` for the base and slosh accelerations,
         the arm's ``ddq`` given: ``tau`` is the external torque on the base (base axes, zero without
-        the effect) and the spring-damper force ``-k x - c dx`` on the slosh joints.
+        the effect) and the spring-damper ``-k x - c dx`` on the slosh joints (:meth:`SloshBody.joint_stiffness_damping`).
         """
         assert self.slosh is not None
-        twist, p, mass = self._slosh_kinematics(t_s, rot_wb, x_m, v_m_s, q_rad, dq_rad_s)
-        nle = pin.nonLinearEffects(self.model, self.data, self._q_full, np.concatenate((twist, dq_rad_s, v_m_s)))
+        twist, p, mass = self._slosh_kinematics(t_s, rot_wb, x_slosh, dx_slosh, q_rad, dq_rad_s)
+        nle = pin.nonLinearEffects(self.model, self.data, self._q_full, np.concatenate((twist, dq_rad_s, dx_slosh)))
         torque_base = np.zeros(3) if self._torque is None else rot_wb.T @ self._torque_world(t_s)
-        slosh = self.slosh
-        acc = slosh_acceleration(mass, nle, torque_base, slosh.stiffness_n_m, slosh.damping_n_s_m, x_m, v_m_s, ddq_rad_s2)
+        stiffness, damping = self.slosh.joint_stiffness_damping()
+        acc = slosh_acceleration(mass, nle, torque_base, stiffness, damping, x_slosh, dx_slosh, ddq_rad_s2)
         return twist, acc, p
 
     def _momentum_at(self, t_s: float) -> FloatArray:
@@ -406,7 +501,7 @@ def _rk4_sum(h: float, k: list[FloatArray]) -> FloatArray:
 
 
 def _slosh_body(effects: HiddenEffects, tank_point_m: FloatArray | None) -> SloshBody | None:
-    """The slosh point mass of ``effects`` at ``tank_point_m``; ``None`` without slosh or with zero slosh mass."""
+    """The slosh point mass of ``effects`` at ``tank_point_m`` (spring or pendulum); ``None`` without slosh or with zero slosh mass."""
     if effects.slosh_mass_kg is None or effects.slosh_mass_kg == 0.0:
         return None
     anchor = None if tank_point_m is None else np.asarray(tank_point_m, dtype=float)
@@ -415,7 +510,37 @@ def _slosh_body(effects: HiddenEffects, tank_point_m: FloatArray | None) -> Slos
             f"tank_point_m: the 'slosh' effect needs the tank position (3 finite numbers, m), got {tank_point_m!r}"
         )
     stiffness, damping = effects.slosh_stiffness_damping()
-    return SloshBody(effects.slosh_mass_kg, stiffness, damping, anchor)
+    if effects.slosh_model != "pendulum":
+        return SloshBody(effects.slosh_mass_kg, stiffness, damping, anchor)
+    axis = np.asarray(effects.slosh_axis, dtype=float)
+    return SloshBody(effects.slosh_mass_kg, stiffness, damping, anchor, effects.slosh_length_m, hinge_frame(axis))
+
+
+def hinge_frame(axis_base: FloatArray) -> FloatArray:
+    """A right-handed orthonormal frame ``[e1 e2 a]`` (3, 3) whose third column is ``axis_base`` normalised.
+
+    ``e1`` is ``y x a`` normalised (or ``a x x`` when ``a`` is within 25 deg of ``y``), ``e2 = a x e1``; for
+    ``a = z`` the frame is the identity (the hinge angles turn about the base x and y axes).
+    """
+    a = axis_base / np.linalg.norm(axis_base)
+    e1 = np.cross([0.0, 1.0, 0.0], a) if abs(a[1]) < 0.9 else np.cross(a, [1.0, 0.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    return np.column_stack((e1, np.cross(a, e1), a))
+
+
+def _initial_slosh(slosh: SloshBody, slosh_m: FloatArray | None, slosh_angles_rad: FloatArray | None) -> FloatArray:
+    """The slosh joint coordinates at reset: ``slosh_m`` (spring) or ``slosh_angles_rad`` (pendulum), default zero."""
+    name, unit, given, other = "slosh_m", "m, base axes", slosh_m, slosh_angles_rad
+    if slosh.is_pendulum:
+        name, unit, given, other = "slosh_angles_rad", "rad, the hinge angles", slosh_angles_rad, slosh_m
+    if other is not None:
+        model = "pendulum" if slosh.is_pendulum else "spring"
+        raise SpaceIdInputError(f"reset: the {model} slosh model starts from {name}; the other is not for it")
+    size = slosh.n_coordinates
+    x0 = np.zeros(size) if given is None else np.asarray(given, dtype=float)
+    if x0.shape != (size,) or not np.all(np.isfinite(x0)):
+        raise SpaceIdInputError(f"reset: {name} expected {size} finite numbers ({unit}), got {given!r}")
+    return x0
 
 
 def _base_without_slosh(base: RigidBodyInertia, slosh: SloshBody) -> RigidBodyInertia:
@@ -438,13 +563,20 @@ def _base_without_slosh(base: RigidBodyInertia, slosh: SloshBody) -> RigidBodyIn
 
 
 def _model_with_slosh(robot: Robot, rigid_base: RigidBodyInertia, slosh: SloshBody) -> pin.Model:
-    """``robot``'s model with ``rigid_base`` and the slosh point mass on prismatic x, y, z joints (base axes) at its anchor."""
+    """``robot``'s model with ``rigid_base`` and the slosh point mass on its joints: prismatic x, y, z (base axes)
+    at its anchor (spring), or revolute about ``e1`` and ``e2`` at the hinge, the mass ``L`` along the rod (pendulum)."""
     model = robot.model_with_base(rigid_base)
-    parent, placement = 1, pin.SE3(np.eye(3), slosh.anchor_m)
-    for axis, joint in zip("xyz", (pin.JointModelPX(), pin.JointModelPY(), pin.JointModelPZ()), strict=True):
-        parent = model.addJoint(parent, joint, placement, f"slosh_{axis}")
+    if slosh.length_m is None:
+        placement, lever = pin.SE3(np.eye(3), slosh.anchor_m), np.zeros(3)
+        joints = (("slosh_x", pin.JointModelPX()), ("slosh_y", pin.JointModelPY()), ("slosh_z", pin.JointModelPZ()))
+    else:
+        placement, lever = pin.SE3(slosh.rot_base_hinge, slosh.hinge_m), np.array([0.0, 0.0, slosh.length_m])
+        joints = (("slosh_hinge_e1", pin.JointModelRX()), ("slosh_hinge_e2", pin.JointModelRY()))
+    parent = 1
+    for name, joint in joints:
+        parent = model.addJoint(parent, joint, placement, name)
         placement = pin.SE3.Identity()
-    model.appendBodyToJoint(parent, pin.Inertia(slosh.mass_kg, np.zeros(3), np.zeros((3, 3))), pin.SE3.Identity())
+    model.appendBodyToJoint(parent, pin.Inertia(slosh.mass_kg, lever, np.zeros((3, 3))), pin.SE3.Identity())
     return model
 
 
@@ -477,8 +609,8 @@ def slosh_base_twist(
 ) -> tuple[FloatArray, FloatArray]:
     """Base twist (6,) and position ``p_wb`` (3,) from ``H_bb v = h_base - H_bm dq - H_bs dx`` (with the slosh joints).
 
-    ``mass``: joint-space mass matrix ``(6 + n + 3)^2`` (upper triangle read), base rows first, then the
-    arm's n, then the slosh joints'; ``com_base_m``: the system CoM in the base frame.
+    ``mass``: joint-space mass matrix ``(6 + n + s)^2`` (upper triangle read), base rows first, then the
+    arm's n, then the s slosh joints' (s = ``slosh_rate.shape[0]``); ``com_base_m``: the system CoM in the base frame.
     """
     n = dq.shape[0]
     p = com_world_m - rot_wb @ com_base_m
@@ -489,7 +621,7 @@ def slosh_base_twist(
             h_bb[a, b] = mass[min(a, b), max(a, b)]
         for k in range(n):
             rhs[a] -= mass[a, 6 + k] * dq[k]
-        for k in range(3):
+        for k in range(slosh_rate.shape[0]):
             rhs[a] -= mass[a, 6 + n + k] * slosh_rate[k]
     return np.linalg.solve(h_bb, rhs), p
 
@@ -505,20 +637,22 @@ def slosh_acceleration(
     slosh_rate: FloatArray,
     ddq: FloatArray,
 ) -> FloatArray:
-    """Slosh acceleration (3,) from the base and slosh rows of ``M a + nle = tau``, the arm's ``ddq`` (n,) given.
+    """Slosh joint accelerations (s,) from the base and slosh rows of ``M a + nle = tau``, the arm's ``ddq`` (n,) given.
 
     ``tau`` = ``[0, 0, 0, torque_base]`` on the base (a pure torque, base axes) and ``-k x - c dx`` on
-    the slosh joints; ``mass`` as in :func:`slosh_base_twist` (upper triangle read), ``nle`` (6 + n + 3,).
+    the s slosh joints (s = ``slosh.shape[0]``); ``mass`` as in :func:`slosh_base_twist` (upper triangle read),
+    ``nle`` (6 + n + s,).
     """
     n = ddq.shape[0]
-    free = np.empty(9, dtype=np.int64)
+    size = 6 + slosh.shape[0]
+    free = np.empty(size, dtype=np.int64)
     free[:6] = np.arange(6)
-    free[6:] = np.arange(6 + n, 9 + n)
-    lhs = np.empty((9, 9))
-    rhs = np.empty(9)
-    for a in range(9):
+    free[6:] = np.arange(6 + n, size + n)
+    lhs = np.empty((size, size))
+    rhs = np.empty(size)
+    for a in range(size):
         i = free[a]
-        for b in range(9):
+        for b in range(size):
             j = free[b]
             lhs[a, b] = mass[min(i, j), max(i, j)]
         coupling = 0.0
