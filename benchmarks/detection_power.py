@@ -50,7 +50,8 @@ def non_centrality(effect: str, seed: int, robot: str = "paper6", magnitude: flo
     fisher = problem.fisher(theta, SENSORS.gyro_std_rad_s(env.control_period_s))
     channel = AttitudeChannel.of(model, log)
     if channel is not None:
-        fisher = fisher + channel.fisher(theta, SENSORS.attitude_noise_rad)
+        # the attitude residual's error model at the truth: the source's noise and the model's own wander
+        fisher = fisher + channel.fisher(theta, channel.estimate_noise(theta))
     k = problem.parameters.n_params - term.n_params
     schur = fisher[k:, k:] - fisher[k:, :k] @ np.linalg.solve(fisher[:k, :k], fisher[:k, k:])
     return float(effect_true @ schur @ effect_true)

@@ -2,8 +2,9 @@
 
 :class:`LevenbergMarquardt` (registry name ``lm``) minimises ``sum(residuals^2)``, the same objective as
 ``problem.cost`` up to the factor ``3T``, with :func:`scipy.optimize.least_squares`, the analytic Jacobian
-(:meth:`~estimators.problem.IdentificationProblem.jacobian`) and ``x_scale`` = the parameters' search widths,
-so a trust region of 1 spans the whole box in every direction. For white Gaussian gyro noise its minimum is
+(:meth:`~estimators.problem.IdentificationProblem.jacobian`) and ``x_scale`` = the parameters' typical sizes
+(``Parameterisation.scale``: the search widths, and an effect's size expected in flight where its search range is far
+wider), so a trust region of 1 spans the box, or an effect's expected size, in every direction. For white Gaussian gyro noise its minimum is
 the maximum-likelihood estimate, whose covariance reaches the Cramér-Rao bound. It converges in ~10
 Jacobians from anywhere in the basin of the global minimum, but it is a local method: the hybrid estimator
 (:mod:`estimators.hybrid`) gives it a start from a global search, through :meth:`LeastSquaresPolish.polish`.
@@ -164,7 +165,7 @@ class LeastSquaresPolish(Estimator):
                 jac=trace.jacobian,
                 bounds=(params.lower, params.upper) if bounded else (-np.inf, np.inf),
                 method=self.method,
-                x_scale=params.width,
+                x_scale=params.scale,
                 ftol=self.ftol,
                 xtol=self.xtol,
                 gtol=self.gtol,

@@ -83,6 +83,11 @@ class Parameterisation(ABC):
         """``upper - lower`` (k,): the unit of the search space and of the identifiability test."""
         return self.upper - self.lower
 
+    @property
+    def scale(self) -> FloatArray:
+        """Typical size of each unknown (k,), which scales it in a local fit: by default the search width."""
+        return self.width
+
     def from_unit(self, unit: FloatArray) -> FloatArray:
         """``theta = lower + unit * width`` (..., k) of positions in the unit search box (..., k)."""
         return self.lower + np.asarray(unit, dtype=float) * self.width
@@ -235,6 +240,11 @@ class WithEffects(Parameterisation):
         edges = np.cumsum([base.n_params, *(t.n_params for t in terms)])
         self._slices = {t: slice(int(a), int(b)) for t, a, b in zip(terms, edges[:-1], edges[1:], strict=True)}
         self._payload = next((t for t in terms if t.name == "payload"), None)
+
+    @property
+    def scale(self) -> FloatArray:
+        """The base's widths, then each term's size expected in flight (its search range can be far wider)."""
+        return np.concatenate([self.base.scale, *(t.scale for t in self.terms)])
 
     def base_part(self, theta: FloatArray) -> FloatArray:
         """The base parameterisation's unknowns (..., k_base)."""

@@ -27,7 +27,7 @@ from estimators.diagnostics.diagnose import (
 )
 from estimators.diagnostics.suite import DIAGNOSTIC_EXCITATION
 from estimators.diagnostics.workflow import parameter_errors, run_loop, write_report
-from estimators.models.attitude_channel import AttitudeChannel
+from estimators.models.attitude_channel import AttitudeChannel, AttitudeNoise
 from estimators.problem import IdentificationModel
 from estimators.registry import make_estimator
 from spaceid_gym.datasets import simulate_episode
@@ -299,7 +299,7 @@ def test_star_tracker_tells_a_torque_from_a_momentum(paper6: Robot) -> None:
     torque = np.array([3e-4, -4e-4, 0.0])
     log = _log(paper6, HiddenEffects(external_torque_Nm=torque))[0]
     sigma_gyro = SensorModel().gyro_std_rad_s(0.02)
-    weights = ChannelWeights(sigma_gyro, SensorModel().attitude_noise_rad)
+    weights = ChannelWeights(sigma_gyro, AttitudeNoise.white(SensorModel().attitude_noise_rad))
     statistics = {}
     for label, w in (("gyro", None), ("both", weights)):
         chi2 = {}
@@ -314,7 +314,7 @@ def test_star_tracker_tells_a_torque_from_a_momentum(paper6: Robot) -> None:
             problem = model.problem(log)
             channel = AttitudeChannel.of(model, log)
             assert channel is not None and fit.attitude_chi2 is not None
-            std = problem.crlb_std(fit.theta, sigma_gyro, channel.fisher(fit.theta, weights.attitude_std_rad))
+            std = problem.crlb_std(fit.theta, sigma_gyro, channel.fisher(fit.theta, weights.attitude))
             assert np.all(np.abs(fit.theta[7:10] - torque) < 4 * std[7:10])
     print(f"torque vs momentum likelihood ratio: {statistics}")  # the README's figures (pytest -s)
     assert statistics["gyro"] < 50 and statistics["both"] > 1000, statistics

@@ -56,7 +56,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -68,7 +68,7 @@ from estimators.base import Estimator
 from estimators.diagnostics.residuals import ResidualAnalysis, analyse_residuals
 from estimators.estimate import Estimate
 from estimators.least_squares import LevenbergMarquardt, interior_start
-from estimators.models.attitude_channel import AttitudeChannel
+from estimators.models.attitude_channel import AttitudeChannel, AttitudeNoise
 from estimators.models.effects import EFFECT_TERMS
 from estimators.parameters import WithEffects
 from estimators.problem import IdentificationModel, IdentificationProblem
@@ -129,11 +129,14 @@ class CandidateScores:
 
 @dataclass(frozen=True)
 class ChannelWeights:
-    """Per-sample noise std of the two channels, which weight them in a joint fit: the gyro's (rad/s, per axis)
-    and the star tracker's (rad, per axis; see :class:`~estimators.models.attitude_channel.AttitudeChannel`)."""
+    """The noise of the two channels, which weights them in a joint fit: the gyro's per-sample std (rad/s, per
+    axis) and the attitude residual's error model (:class:`~estimators.models.attitude_channel.AttitudeNoise`)."""
 
     gyro_std_rad_s: float
-    attitude_std_rad: float
+    attitude: AttitudeNoise
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"gyro_std_rad_s": self.gyro_std_rad_s, **self.attitude.to_dict()}
 
 
 @dataclass
@@ -152,6 +155,9 @@ class ModelFit(CandidateScores):
         wall_time_s: time of the fit.
         chi2: both channels' chi-square (:func:`_score`); ``residual_consistent``: whether the fit's gyro residual
             passes every test of :func:`~estimators.diagnostics.residuals.analyse_residuals` (``None``: not analysed).
+        attitude_white_p: p-value of the attitude residual, whitened by its error model, against unit white noise in
+            the effects' band (:func:`low_frequency_p_value`): small when the attitude source's errors are not what
+            the model assumes (``nan``: no attitude).
     """
 
     effects: tuple[str, ...]
@@ -168,6 +174,7 @@ class ModelFit(CandidateScores):
     wall_time_s: float
     chi2: float = math.nan  # filled in by :func:`diagnose` once every model is fitted
     residual_consistent: bool | None = None  # filled in by :func:`diagnose` for the significant and plausible ones
+    attitude_white_p: float = math.nan  # the whitened attitude residual's low-frequency test (:func:`low_frequency_p_value`)
 
     @property
     def residual_rms_rad_s(self) -> float:
@@ -194,6 +201,7 @@ class ModelFit(CandidateScores):
             "attitude_chi2": self.attitude_chi2,
             "chi2": self.chi2,
             "residual_consistent": self.residual_consistent,
+            "attitude_white_p": self.attitude_white_p,
             **self.scores(),
             "plausible": self.plausible,
             "implausible": list(self.implausible),
@@ -217,6 +225,8 @@ class Diagnosis:
         weights: the noise levels weighting the gyro and the attitude channel in every fit (``None``: the log has
             no attitude, the gyro alone was fitted).
         combined: the leader fitted together with each challenger (:func:`_prefer_encompassing`; often none).
+        attitude_rejected: the log has attitude, but its residual fitted its error model at no candidate, so this
+            diagnosis rests on the gyro alone (``weights`` is ``None``; the reason says so).
     """
 
     verdict: str
@@ -229,6 +239,13 @@ class Diagnosis:
     weights: ChannelWeights | None
     baseline_estimate: Estimate | None = field(default=None, repr=False)
     combined: list[ModelFit] = field(default_factory=list)
+    attitude_rejected: bool = False
+
+    @property
+    def attitude_consistent(self) -> bool:
+        """Whether the attitude residual, whitened by its error model, is white at some fit (the baseline or a
+        candidate) at level ``alpha``: if at none, the attitude source is not what the model assumes."""
+        return any(f.attitude_white_p >= self.alpha for f in [self.baseline, *self.candidates])
 
     def fit_of(self, effect: str | None) -> ModelFit | None:
         """The candidate fit of ``effect``, if it was tried."""
@@ -246,7 +263,8 @@ class Diagnosis:
             "reason": self.reason,
             "alpha": self.alpha,
             "noise_std_rad_s": self.noise_std_rad_s,
-            "attitude_channel": None if self.weights is None else asdict(self.weights),
+            "attitude_channel": None if self.weights is None else self.weights.to_dict(),
+            "attitude_rejected": self.attitude_rejected,
             "baseline": self.baseline.to_dict(),
             "candidates": [c.to_dict() for c in self.candidates],
             "combined": [c.to_dict() for c in self.combined],
@@ -283,6 +301,7 @@ def fit_model(
     effect: str | None = None,
     weights: ChannelWeights | None = None,
     channel: AttitudeChannel | None = None,
+    problem: IdentificationProblem | None = None,
 ) -> tuple[ModelFit, Estimate | None]:
     """Fit ``model`` to ``log``: with ``estimator`` (returns its estimate), or by least squares from each of ``starts``.
 
@@ -290,10 +309,11 @@ def fit_model(
     the result that is best on both channels is then refined on the likelihood of both,
     ``|gyro residual|^2 / sigma_gyro^2 + |attitude residual|^2 / sigma_st^2`` (at most :data:`MAX_ITERATIONS`
     residual evaluations); otherwise the best on the gyro is kept. ``channel``: ``model``'s attitude channel on
-    ``log`` if the caller has built it already (else built here when ``weights`` are given).
+    ``log`` if the caller has built it already (else built here when ``weights`` are given); ``problem``: ``model``'s
+    problem on ``log``, likewise.
     """
     begin = time.perf_counter()
-    problem = model.problem(log)
+    problem = model.problem(log) if problem is None else problem
     if weights is None:
         channel = None
     elif channel is None:
@@ -315,20 +335,41 @@ def fit_model(
         else:
             scores = [float(r @ r) for r in (problem.residuals(x, count=False) for x in results)]
             theta = results[int(np.argmin(scores))]
-    attitude_chi2, attitude_information = None, None
+    attitude_chi2, attitude_information, attitude_white_p = None, None, math.nan
     if channel is not None:
         assert weights is not None
-        attitude = channel.residuals(theta) / weights.attitude_std_rad
-        attitude_chi2 = float(attitude @ attitude)
-        attitude_information = channel.fisher(theta, weights.attitude_std_rad)
+        whitened = channel.residuals(theta, weights.attitude)
+        attitude_chi2 = float(whitened @ whitened)
+        attitude_information = channel.fisher(theta, weights.attitude)
+        attitude_white_p = low_frequency_p_value(whitened.reshape(-1, 3), ATTITUDE_BLOCK_S / float(np.mean(np.diff(log.t_s))))
     n_attitude = 0 if channel is None else channel.n_values
     fit = _scored(problem, theta, model, effect, (attitude_chi2, n_attitude), attitude_information, weights)
     fit.wall_time_s = time.perf_counter() - begin
+    fit.attitude_white_p = attitude_white_p
     return fit, estimate
 
 
 #: accepted least-squares steps per start of a candidate fit
 MAX_ITERATIONS = 30
+
+#: block length (s) of the low-frequency test of the whitened attitude residual (:func:`low_frequency_p_value`):
+#: the band below ~0.5 Hz where the effects act
+ATTITUDE_BLOCK_S = 1.0
+
+
+def low_frequency_p_value(whitened: FloatArray, block_samples: float) -> float:
+    """p-value of the whitened residual (n, c) having no more power in its block sums than unit white noise.
+
+    Blocks of ``round(block_samples)`` samples (at least 1); each block's sum over the square root of its length
+    is standard normal under the error model, so their squares add up to a chi-square with one degree of freedom
+    per block and column. Only the upper tail counts: what matters is power the model does not expect where the
+    effects act (slow), not a misfit at short lags (the midpoint rule against a servo's motion between samples)."""
+    size = max(round(block_samples), 1)
+    n_blocks = whitened.shape[0] // size
+    if n_blocks < 1:
+        return 1.0
+    sums = whitened[: n_blocks * size].reshape(n_blocks, size, -1).sum(axis=1) / math.sqrt(size)
+    return float(chi2.sf(float(np.sum(sums * sums)), sums.size))
 
 
 def _joint_residuals(
@@ -336,7 +377,7 @@ def _joint_residuals(
 ) -> FloatArray:
     """``[gyro residual / sigma_gyro; attitude residual / sigma_st]`` (6T,) at ``theta`` (k,)."""
     return np.concatenate(
-        (problem.residuals(theta) / weights.gyro_std_rad_s, channel.residuals(theta) / weights.attitude_std_rad)
+        (problem.residuals(theta) / weights.gyro_std_rad_s, channel.residuals(theta, weights.attitude))
     )
 
 
@@ -353,14 +394,14 @@ def _joint_fit(
     params = problem.parameters
 
     def jacobian(x: FloatArray) -> FloatArray:
-        return np.vstack((problem.jacobian(x) / weights.gyro_std_rad_s, channel.jacobian(x) / weights.attitude_std_rad))
+        return np.vstack((problem.jacobian(x) / weights.gyro_std_rad_s, channel.jacobian(x, weights.attitude)))
 
     result = least_squares(
         lambda x: _joint_residuals(problem, channel, weights, x),
         np.clip(start, params.lower, params.upper),
         jac=jacobian,
         bounds=(params.lower, params.upper),
-        x_scale=params.width,
+        x_scale=params.scale,
         method="trf",
         max_nfev=MAX_ITERATIONS,
     )
@@ -441,12 +482,34 @@ def diagnose(
     if unknown:
         raise SpaceIdInputError(f"candidates: unknown effects {unknown}; expected names from {', '.join(EFFECT_TERMS)}")
     baseline, estimate = fit_model(model, log, estimator or make_estimator("hybrid"))
+    channel = AttitudeChannel.of(model, log)
+    diagnosis = _diagnose(model, log, names, baseline, alpha, channel)
+    if channel is not None and not diagnosis.attitude_consistent:
+        p_best = max(f.attitude_white_p for f in [diagnosis.baseline, *diagnosis.candidates])
+        diagnosis = _diagnose(model, log, names, baseline, alpha, None)
+        diagnosis.reason = (
+            f"the attitude residual fits its error model at no candidate (whiteness p <= {p_best:.2g}): the attitude source "
+            f"is not what the model assumes, so the verdict rests on the gyro alone; {diagnosis.reason}"
+        )
+        diagnosis.attitude_rejected = True
+    diagnosis.baseline_estimate = estimate
+    return diagnosis
+
+
+def _diagnose(
+    model: IdentificationModel,
+    log: MeasurementLog,
+    names: list[str],
+    baseline: ModelFit,
+    alpha: float,
+    channel: AttitudeChannel | None,
+) -> Diagnosis:
+    """:func:`diagnose` from the estimator's ``baseline`` fit (gyro alone), with the attitude ``channel`` or without."""
     sigma0 = math.sqrt(baseline.rss / (baseline.n_residuals - baseline.n_params))
     weights = None
-    channel = AttitudeChannel.of(model, log)
     if channel is not None:
         # both channels from here on; the star tracker's noise from the data, the baseline refitted to both
-        weights = ChannelWeights(sigma0, channel.noise_std(baseline.theta))
+        weights = ChannelWeights(sigma0, channel.estimate_noise(baseline.theta))
         baseline = fit_model(model, log, starts=[baseline.theta], weights=weights, channel=channel)[0]
     fits = []
     for name in names:
@@ -457,10 +520,12 @@ def diagnose(
         # from the baseline fit, and once from the default start (a missing effect can drag the baseline far off)
         restart = interior_start(params)[: len(baseline.theta)]
         k_base = params.base.n_params
-        starts = [np.concatenate((baseline.theta, s)) for s in term.starts(baseline.theta[:k_base])]
+        problem = extended.problem(log)
+        starts = best_of_grid(problem, [np.concatenate((baseline.theta, s)) for s in term.grid(baseline.theta[:k_base])])
         starts.append(np.concatenate((restart, term.starts(restart[:k_base])[0])))
-        fits.append(fit_model(extended, log, starts=starts, effect=name, weights=weights)[0])
-    sigma = _score(baseline, fits, alpha)
+        fits.append(fit_model(extended, log, starts=starts, effect=name, weights=weights, problem=problem)[0])
+    gyro_residual = model.problem(log).residuals(baseline.theta, count=False).reshape(-1, 3)
+    sigma = _score(baseline, fits, alpha, difference_noise_std(gyro_residual))
     combined = _fit_challengers(model, log, baseline, fits, alpha, weights, sigma)
     for fit in fits:
         if fit.nameable:
@@ -469,7 +534,20 @@ def diagnose(
     analysis = _analyse_fit(model, log, baseline.theta, sigma)
     verdict, reason = _verdict(baseline, fits, analysis, alpha, combined)
     fits.sort(key=lambda f: (f.effect != verdict, f.bic))
-    return Diagnosis(verdict, baseline, fits, analysis, sigma, alpha, reason, weights, estimate, combined)
+    return Diagnosis(verdict, baseline, fits, analysis, sigma, alpha, reason, weights, combined=combined)
+
+
+#: how many of a term's grid candidates (:meth:`~estimators.models.effects.EffectTerm.grid`) start local fits
+GRID_STARTS = 3
+
+
+def best_of_grid(problem: IdentificationProblem, candidates: list[FloatArray]) -> list[FloatArray]:
+    """The :data:`GRID_STARTS` candidates (each (k,)) of lowest gyro cost, scored in one batched evaluation."""
+    if len(candidates) <= GRID_STARTS:
+        return candidates
+    points = np.clip(np.array(candidates), problem.parameters.lower, problem.parameters.upper)
+    order = np.argsort(problem.cost(points, count=False))
+    return [points[i] for i in order[:GRID_STARTS]]
 
 
 def _analyse_fit(model: IdentificationModel, log: MeasurementLog, theta: FloatArray, sigma: float) -> ResidualAnalysis:
@@ -526,8 +604,20 @@ def _fit_challengers(
     return combined
 
 
-def _score(baseline: ModelFit, fits: list[ModelFit], alpha: float) -> float:
-    """Fill in the scores of every fit; returns the gyro noise std used (rad/s)."""
+def difference_noise_std(residual: FloatArray) -> float:
+    """The white part of a residual's noise (T, c): ``sqrt(mean(diff^2) / 2)``, blind to slow structure (an effect's
+    residual changes little from one sample to the next, white noise fully)."""
+    steps = np.diff(np.asarray(residual, dtype=float), axis=0)
+    return float(np.sqrt(np.mean(steps * steps) / 2.0))
+
+
+def _score(baseline: ModelFit, fits: list[ModelFit], alpha: float, white_std: float | None = None) -> float:
+    """Fill in the scores of every fit; returns the gyro noise std used (rad/s).
+
+    The likelihood-ratio tests scale the gyro's chi-square by the best fit's residual variance; the explained
+    fractions by ``white_std`` (rad/s, :func:`difference_noise_std`; default the same variance), so that
+    structure no candidate removes (a disturbance outside the catalogue) counts in the excess over the noise
+    instead of being absorbed by it."""
     everything = [baseline, *fits]
     sigma2 = min(f.rss / (f.n_residuals - f.n_params) for f in everything)
     for f in everything:
@@ -538,13 +628,14 @@ def _score(baseline: ModelFit, fits: list[ModelFit], alpha: float) -> float:
         f.delta_bic = f.bic - baseline.bic
         if f.attitude_chi2 is not None:
             f.attitude_p_value = float(chi2.sf(f.attitude_chi2, f.n_attitude_values))
-    excess = baseline.chi2 - (n - baseline.n_params)
+    white2 = sigma2 if white_std is None else max(white_std * white_std, sigma2 * 1e-6)
+    excess = _chi2(baseline, white2) - (n - baseline.n_params)
     for f in fits:
         k = f.n_params - baseline.n_params
         f.lr_statistic = baseline.chi2 - f.chi2
         f.p_value = float(chi2.sf(max(f.lr_statistic, 0.0), k))
         f.significant = f.p_value < alpha / max(len(fits), 1)
-        f.explained_fraction = explained_fraction(f.lr_statistic, excess)
+        f.explained_fraction = explained_fraction(_chi2(baseline, white2) - _chi2(f, white2), excess)
     return math.sqrt(sigma2)
 
 

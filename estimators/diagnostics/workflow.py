@@ -22,7 +22,7 @@ from estimators.diagnostics.diagnose import Diagnosis, candidate_model, diagnose
 from estimators.diagnostics.plots import plot_before_after, plot_correlations, plot_overlay, plot_ranking, plot_residuals
 from estimators.diagnostics.report import HtmlReport
 from estimators.estimate import Estimate
-from estimators.models.attitude_channel import AttitudeChannel
+from estimators.models.attitude_channel import AttitudeChannel, AttitudeNoise
 from estimators.parameters import WithEffects
 from estimators.problem import IdentificationModel
 from spaceid_gym.errors import SpaceIdInputError
@@ -56,8 +56,8 @@ def apply_effect(
     channel = None if diagnosis.weights is None else AttitudeChannel.of(extended, log)
     if channel is not None and diagnosis.weights is not None:
         # fitted to the gyro and the star tracker: the bound is that of both
-        options["attitude_std_rad"] = diagnosis.weights.attitude_std_rad
-        extra_information = channel.fisher(fit.theta, diagnosis.weights.attitude_std_rad)
+        options["attitude_noise"] = diagnosis.weights.attitude.to_dict()
+        extra_information = channel.fisher(fit.theta, diagnosis.weights.attitude)
     return extended, problem.make_estimate(
         fit.theta,
         estimator="diagnose",
@@ -123,7 +123,7 @@ def parameter_errors(
     in Cramér-Rao std at the true parameters; ``None`` if the model or the truth lacks the fuel unknowns.
 
     The bound is the Cramér-Rao bound's own point, the truth (with the estimate's noise level; with the star
-    tracker's too for an estimate fitted to both, whose options hold ``attitude_std_rad``), as in
+    tracker's too for an estimate fitted to both, whose options hold ``attitude_noise``), as in
     :mod:`estimators.evaluation`; the estimate's ``theta_std`` is the bound at the estimate and is kept beside it.
     The two differ where the information changes fast with the unknowns: the tank position's bound scales roughly
     as ``1 / mdf``, and with a payload's 10 unknowns mdf and the tank position can be correlated beyond 0.95, so an
@@ -139,9 +139,9 @@ def parameter_errors(
             f"{model.parameters.name!r}"
         )
     index = [model.parameters.names.index(n) for n in FUEL_PARAMETER_NAMES]
-    attitude_std = estimate.options.get("attitude_std_rad")
-    channel = None if attitude_std is None else AttitudeChannel.of(model, log)
-    extra_information = None if channel is None else channel.fisher(theta_true, float(attitude_std))
+    attitude_noise = estimate.options.get("attitude_noise")
+    channel = None if attitude_noise is None else AttitudeChannel.of(model, log)
+    extra_information = None if channel is None else channel.fisher(theta_true, AttitudeNoise.from_dict(attitude_noise))
     std = model.problem(log).crlb_std(theta_true, estimate.noise_std_rad_s, extra_information)
     return ParameterErrors(FUEL_PARAMETER_NAMES, estimate.theta[index] - theta_true[index], std[index], estimate.theta_std[index])
 

@@ -19,20 +19,38 @@ first sample (``A_k = R_0^T R_k``, ``R`` base to inertial):
   joint rates: their noise telescopes too, where the rate sensors' noise would integrate into a random walk
   of the predicted attitude. Midpoint rule: its error per step is O(dt^3) (tests hold the whole channel to
   1e-7 rad on a noise-free log);
-* residual ``Phi_hat - Phi`` minus its mean over the log (per axis): the mean absorbs ``A_0 n_0``, 3 of the
-  3T values; what is left is white with the star tracker's per-axis std ``sigma_st``.
+* residual ``e_k = Phi_hat_k - Phi_k``, compared through its first differences ``d_k = e_k - e_{k-1}``
+  (the constant ``A_0 n_0`` drops out).
 
-``sigma_st`` is estimated from the data (:meth:`AttitudeChannel.noise_std`): the first differences of the
-residual are ``A_k n_k - A_{k-1} n_{k-1}`` plus the model's error over one step (far below the noise for any
-fit near the data), so their mean square is ``2 sigma_st^2``.
+The residual's error model (:class:`AttitudeNoise`) has two parts per axis, both estimated from the data:
+
+* the attitude source's white error ``w_k`` (std ``white_std_rad``): a star tracker's noise;
+* the model's own accumulated error ``s_k``, whose steps ``a_k = s_k - s_{k-1}`` are a first-order
+  autoregression, ``a_k = phi a_{k-1} + nu_k`` (``walk_std_rad``: std of ``nu``; ``walk_correlation``: ``phi``
+  in ``[0, 1)``). ``phi = 0`` is a random walk (encoder and rate noise through the nonlinear momentum map, a
+  filtered attitude's drift with its gyro); ``phi`` near 1 a smooth wander (the midpoint rule against the
+  true motion between samples, another simulator's integrator).
+
+Then ``u_k = d_k - phi d_{k-1} = w_k - (1 + phi) w_{k-1} + phi w_{k-2} + nu_k`` (``k >= 2``) is a moving average
+of order 2: its covariance is banded (``sw^2 (1 + (1 + phi)^2 + phi^2) + snu^2`` on the diagonal,
+``-sw^2 (1 + phi)^2`` and ``sw^2 phi`` beside it), and the channel whitens ``u`` with that covariance's banded
+Cholesky factor: ``3T - 6`` values, a chi-square exact for this model. A precise attitude source (noise-free
+or filtered, ``sw`` near 0) therefore no longer makes the model's wander look like a missing effect: the
+wander is ``s``, not sensor noise. The three numbers per axis are fitted by maximum likelihood
+(:meth:`AttitudeChannel.estimate_noise`); how well the model describes a log's attitude errors is checked
+by the whiteness of the whitened residual (``diagnose`` falls back to the gyro alone where it is not white).
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Protocol
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.linalg import cholesky_banded, solve_banded
+from scipy.optimize import minimize
 from scipy.spatial.transform import Rotation, Slerp
 
 from spaceid_gym.errors import SpaceIdInputError
@@ -50,6 +68,113 @@ class BaseRateProblem(Protocol):
     def base_rate(self, theta: FloatArray, count: bool = True) -> FloatArray: ...
 
     def base_rate_jacobian(self, theta: FloatArray, count: bool = True) -> FloatArray: ...
+
+
+#: the smallest std (rad) either part of :class:`AttitudeNoise` may have: keeps the whitening finite on a
+#: noise-free log (the midpoint rule's own error there is ~1e-9 rad per step)
+MIN_STD_RAD = 1e-10
+
+#: the largest step correlation ``phi`` fitted (:func:`fit_attitude_noise`)
+MAX_CORRELATION = 0.999
+
+
+@dataclass(frozen=True)
+class AttitudeNoise:
+    """The attitude residual's error model, per axis of the first sample's base frame (see the module docstring).
+
+    Attributes:
+        white_std_rad: std of the attitude source's white error (3,), rad.
+        walk_std_rad: std of the innovation ``nu`` of the model's wander steps (3,), rad.
+        walk_correlation: ``phi`` (3,), in ``[0, 1)``: the correlation of successive wander steps (0: a random walk).
+    """
+
+    white_std_rad: tuple[float, float, float]
+    walk_std_rad: tuple[float, float, float]
+    walk_correlation: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        for label in ("white_std_rad", "walk_std_rad", "walk_correlation"):
+            value = np.asarray(getattr(self, label), dtype=float)
+            if value.shape != (3,) or not np.all(np.isfinite(value)) or np.any(value < 0.0):
+                raise SpaceIdInputError(f"attitude noise: {label} expected 3 finite numbers >= 0, got {value!r}")
+        if np.any(np.asarray(self.walk_correlation) >= 1.0):
+            raise SpaceIdInputError(f"attitude noise: walk_correlation expected values in [0, 1), got {self.walk_correlation!r}")
+
+    @classmethod
+    def white(cls, std_rad: float) -> AttitudeNoise:
+        """A white attitude error of ``std_rad`` per axis and no wander (a star tracker and an exact model)."""
+        return cls((std_rad,) * 3, (0.0,) * 3)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> AttitudeNoise:
+        """The inverse of :meth:`to_dict`."""
+        return cls(*(tuple(float(v) for v in data[k]) for k in ("white_std_rad", "walk_std_rad", "walk_correlation")))  # type: ignore[arg-type]
+
+    def to_dict(self) -> dict[str, list[float]]:
+        """JSON-able: ``white_std_rad``, ``walk_std_rad`` and ``walk_correlation``, three each."""
+        return {k: [float(v) for v in getattr(self, k)] for k in ("white_std_rad", "walk_std_rad", "walk_correlation")}
+
+    def factors(self, n_steps: int) -> list[FloatArray]:
+        """Per axis, the lower banded Cholesky factor (3, n_steps - 1) of the filtered differences' covariance."""
+        return [
+            _filtered_factor(white, walk, phi, n_steps - 1)
+            for white, walk, phi in zip(self.white_std_rad, self.walk_std_rad, self.walk_correlation, strict=True)
+        ]
+
+    def whiten(self, differences: FloatArray, factors: list[FloatArray] | None = None) -> FloatArray:
+        """Differenced residuals (T-1, 3) or their Jacobian (T-1, 3, k) -> whitened (T-2, 3[, k]): ``u = d_k - phi
+        d_{k-1}``, then ``L^-1 u`` per axis, unit variance and independent under the model."""
+        factors = self.factors(differences.shape[0]) if factors is None else factors
+        out = np.empty((differences.shape[0] - 1, *differences.shape[1:]))
+        for axis, (phi, factor) in enumerate(zip(self.walk_correlation, factors, strict=True)):
+            d = differences[:, axis]
+            out[:, axis] = solve_banded((2, 0), factor, d[1:] - phi * d[:-1], check_finite=False)
+        return out
+
+
+def _filtered_factor(white_std: float, walk_std: float, phi: float, n: int) -> FloatArray:
+    """Lower banded Cholesky factor (3, n) of the MA(2) covariance of ``u`` (see the module docstring)."""
+    sw2, snu2 = max(white_std, MIN_STD_RAD) ** 2, max(walk_std, MIN_STD_RAD) ** 2
+    bands = np.zeros((3, n))
+    bands[0] = sw2 * (1.0 + (1.0 + phi) ** 2 + phi * phi) + snu2
+    bands[1, :-1] = -sw2 * (1.0 + phi) ** 2
+    bands[2, :-2] = sw2 * phi
+    return cholesky_banded(bands, lower=True, check_finite=False)
+
+
+def _negative_log_likelihood(x: FloatArray, differences: FloatArray) -> float:
+    """``-log L`` (up to a constant) of one axis's differences (n,) for ``x = [log sw, log snu, logit phi]``."""
+    phi = MAX_CORRELATION / (1.0 + math.exp(-x[2]))
+    factor = _filtered_factor(math.exp(x[0]), math.exp(x[1]), phi, len(differences) - 1)
+    whitened = solve_banded((2, 0), factor, differences[1:] - phi * differences[:-1], check_finite=False)
+    return float(np.sum(np.log(factor[0])) + 0.5 * whitened @ whitened)
+
+
+def fit_attitude_noise(differences: FloatArray) -> AttitudeNoise:
+    """Maximum-likelihood :class:`AttitudeNoise` of differenced attitude residuals (T-1, 3), rad, axis by axis.
+
+    Starts from the moments of a white error plus a random walk (lag-1 autocovariance ``-sw^2``, variance
+    ``2 sw^2 + snu^2``) with ``phi`` = 0.5, and from ``phi`` = 0.05 and 0.95, refining all three numbers with
+    Nelder-Mead (a smooth three-dimensional likelihood); the best of the three."""
+    white, walk, correlation = [], [], []
+    for d in np.asarray(differences, dtype=float).T:
+        variance = float(d @ d) / len(d)
+        lag1 = float(d[1:] @ d[:-1]) / len(d)
+        sw2 = min(max(-lag1, 0.01 * variance), 0.49 * variance)
+        snu2 = max(variance - 2.0 * sw2, 0.01 * variance)
+        logs = 0.5 * np.log(np.maximum([sw2, snu2], MIN_STD_RAD**2))
+        best = None
+        for phi in (0.05, 0.5, 0.95):
+            start = np.array([*logs, math.log(phi / (MAX_CORRELATION - phi))])
+            result = minimize(_negative_log_likelihood, start, args=(d,), method="Nelder-Mead", options={"xatol": 1e-4, "fatol": 1e-6})
+            if best is None or result.fun < best.fun:
+                best = result
+        assert best is not None
+        w, r = math.exp(best.x[0]), math.exp(best.x[1])
+        white.append(w if w > MIN_STD_RAD else 0.0)
+        walk.append(r if r > MIN_STD_RAD else 0.0)
+        correlation.append(MAX_CORRELATION / (1.0 + math.exp(-best.x[2])))
+    return AttitudeNoise(tuple(white), tuple(walk), tuple(correlation))  # type: ignore[arg-type]
 
 
 def midpoint_log(log: MeasurementLog) -> MeasurementLog:
@@ -88,7 +213,7 @@ class AttitudeChannel:
 
     Attributes:
         measured: ``Phi`` (T, 3), rad, the star tracker's accumulated rotation, first sample's base axes.
-        n_values: ``3T - 3``, the residual's degrees of freedom (the mean is removed).
+        n_values: ``3T - 6``, the whitened residual's values (:meth:`residuals`).
     """
 
     def __init__(self, problem: BaseRateProblem, log: MeasurementLog) -> None:
@@ -103,7 +228,9 @@ class AttitudeChannel:
         self.measured = np.concatenate((np.zeros((1, 3)), np.cumsum(increments, axis=0)))
         #: ``(A_{j-1} + A_j) / 2 * dt_j`` (T-1, 3, 3): maps the step's midpoint rate to its rotation increment
         self._step_map = 0.5 * (relative[:-1] + relative[1:]) * np.diff(np.asarray(log.t_s, dtype=float))[:, None, None]
-        self.n_values = 3 * log.n_samples - 3
+        self._measured_steps = increments
+        self._cached: tuple[AttitudeNoise, list[FloatArray]] | None = None
+        self.n_values = 3 * log.n_samples - 6
 
     @classmethod
     def of(cls, model: IdentificationModel, log: MeasurementLog) -> AttitudeChannel | None:
@@ -118,25 +245,42 @@ class AttitudeChannel:
         steps = np.einsum("tij,ptj->pti", self._step_map, omega)
         return np.concatenate((np.zeros((len(steps), 1, 3)), np.cumsum(steps, axis=1)), axis=1)
 
-    def residuals(self, theta: FloatArray) -> FloatArray:
-        """``Phi_hat - Phi`` minus its mean per axis (3T,), rad, at ``theta`` (k,)."""
-        error = self.predicted(theta)[0] - self.measured
-        return (error - error.mean(axis=0)).ravel()
+    def differences(self, theta: FloatArray) -> FloatArray:
+        """``d_k = e_k - e_{k-1}`` (T-1, 3), rad, of the residual ``e = Phi_hat - Phi`` at ``theta`` (k,)."""
+        omega = self.problem.base_rate(np.atleast_2d(theta))[0, 1:]
+        return np.einsum("tij,tj->ti", self._step_map, omega) - self._measured_steps
 
-    def jacobian(self, theta: FloatArray) -> FloatArray:
-        """``d residuals / d theta`` (3T, k) at ``theta`` (k,)."""
+    def residuals(self, theta: FloatArray, noise: AttitudeNoise) -> FloatArray:
+        """The whitened differences (3T-6,) at ``theta`` (k,): unit variance and independent under ``noise``."""
+        return noise.whiten(self.differences(theta), self._factors(noise)).ravel()
+
+    def difference_jacobian(self, theta: FloatArray) -> FloatArray:
+        """``d differences / d theta`` (T-1, 3, k) at ``theta`` (k,)."""
         n_t = len(self.measured)
         rates = self.problem.base_rate_jacobian(np.asarray(theta, dtype=float)).reshape(n_t, 3, -1)[1:]
-        steps = np.einsum("tij,tjk->tik", self._step_map, rates)
-        accumulated = np.concatenate((np.zeros((1, 3, steps.shape[2])), np.cumsum(steps, axis=0)))
-        return (accumulated - accumulated.mean(axis=0)).reshape(3 * n_t, -1)
+        return np.einsum("tij,tjk->tik", self._step_map, rates)
 
-    def fisher(self, theta: FloatArray, noise_std_rad: float) -> FloatArray:
-        """Fisher information (k, k) of the star tracker about ``theta`` (k,), for its per-axis noise std (rad)."""
-        jac = self.jacobian(theta)
-        return (jac.T @ jac) / (noise_std_rad * noise_std_rad)
+    def jacobian(self, theta: FloatArray, noise: AttitudeNoise) -> FloatArray:
+        """``d residuals / d theta`` (3T-6, k) at ``theta`` (k,)."""
+        jac = self.difference_jacobian(theta)
+        return noise.whiten(jac, self._factors(noise)).reshape(-1, jac.shape[2])
 
-    def noise_std(self, theta: FloatArray) -> float:
-        """The star tracker's per-axis noise std (rad), from the first differences of the residual at ``theta`` (k,)."""
-        steps = np.diff(self.residuals(theta).reshape(-1, 3), axis=0)
-        return float(np.sqrt(np.mean(steps * steps) / 2.0))
+    def chi2(self, theta: FloatArray, noise: AttitudeNoise) -> float:
+        """The channel's chi-square at ``theta`` (k,) under ``noise`` (``n_values`` degrees of freedom at the truth)."""
+        r = self.residuals(theta, noise)
+        return float(r @ r)
+
+    def fisher(self, theta: FloatArray, noise: AttitudeNoise) -> FloatArray:
+        """Fisher information (k, k) of the attitude source about ``theta`` (k,) under ``noise``."""
+        jac = self.jacobian(theta, noise)
+        return jac.T @ jac
+
+    def estimate_noise(self, theta: FloatArray) -> AttitudeNoise:
+        """The error model fitted to the residual at ``theta`` (k,) by maximum likelihood (:func:`fit_attitude_noise`)."""
+        return fit_attitude_noise(self.differences(theta))
+
+    def _factors(self, noise: AttitudeNoise) -> list[FloatArray]:
+        """The whitening factors of ``noise``, cached for the last noise model asked."""
+        if self._cached is None or self._cached[0] != noise:
+            self._cached = (noise, noise.factors(len(self._measured_steps)))
+        return self._cached[1]

@@ -25,9 +25,14 @@ search range) and acts in one of three places of the prediction:
 or, in a log without them, by integrating the logged gyro rate (its angle random walk, ~2e-4 rad over a
 minute for the default gyro, is negligible here).
 
-Plausibility (:meth:`EffectTerm.implausible`): an effect whose fitted value sits on its search bound, where the
-data can tell that bound from the nominal, is not plausible (it absorbs something else), and each term adds
-its physics (a payload must be a physical body, the slosh mass cannot exceed the liquid left in the tank).
+Search range and plausibility are two things. Each term searches a physically *wide* range (stated in its
+docstring: a momentum up to what spins the satellite at :data:`MAX_BASE_RATE_RAD_S`, a delay up to
+:data:`MAX_DELAY_S`, a slosh mass up to the usable fuel, frequencies 0.02-2 Hz), far beyond the sizes
+expected in flight, so that a real effect larger than expected is still fitted where it is. Plausibility
+(:meth:`EffectTerm.implausible`) is a physical judgement only: a payload must be a physical body with a
+positive mass, the slosh mass cannot exceed the liquid left in the tank. A value on its search bound is no
+reason: the range is not a limit of reality. Each term also has a typical size (:attr:`EffectTerm.scale`,
+the sizes expected in flight), which scales its unknowns in the local fits.
 
 The simulator implements the same effects independently as physics (:mod:`spaceid_gym.effects`); tests
 compare the two. Both share the field names of ``truth.json``'s ``hidden_effects``:
@@ -36,6 +41,7 @@ compare the two. Both share the field names of ``truth.json``'s ``hidden_effects
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -54,9 +60,21 @@ from spaceid_gym.sim.lie import matrix_from_quat, so3_exp
 
 FloatArray = NDArray[np.float64]
 
-#: a fitted value on its search bound makes the effect implausible only if the bound is more than this many
-#: Cramér-Rao standard deviations from the nominal (see :meth:`EffectTerm.implausible`)
-BOUND_STD = 3.0
+#: the base rate (rad/s) that sets the momentum search range: 5 deg/s, a tumbling satellite (a detumbled one
+#: keeps 0.01-0.05 deg/s)
+MAX_BASE_RATE_RAD_S = math.radians(5.0)
+
+#: the window over which the largest torque searched brings that momentum, s
+TORQUE_RANGE_WINDOW_S = 60.0
+
+#: the largest gyro-to-encoder delay searched, s (a badly synchronised data bus, far beyond 10-40 ms)
+MAX_DELAY_S = 2.0
+
+
+def momentum_range_nms(robot: Robot) -> float:
+    """``MAX_BASE_RATE_RAD_S`` times the full-tank base's largest principal moment of inertia, N m s."""
+    inertia = np.asarray(robot.base_full.inertia_com_kgm2, dtype=float)
+    return float(MAX_BASE_RATE_RAD_S * np.linalg.eigvalsh(0.5 * (inertia + inertia.T))[-1])
 
 
 @dataclass(frozen=True)
@@ -101,7 +119,8 @@ class EffectTerm(ABC):
 
     Attributes:
         name: the catalogue name.
-        names: its unknowns with units (k_e,); ``nominal`` (switches the effect off), ``lower``, ``upper`` (k_e,).
+        names: its unknowns with units (k_e,); ``nominal`` (switches the effect off), ``lower``, ``upper`` (k_e,),
+            the search range; ``scale`` (k_e,), the size expected in flight, which scales the unknowns in a fit.
         stage: ``"body"``, ``"momentum"``, ``"slosh"`` or ``"measurement"``: where it acts.
     """
 
@@ -114,10 +133,11 @@ class EffectTerm(ABC):
     #: in order, each with its number of values (see :meth:`from_truth`)
     truth_fields: tuple[tuple[str, int], ...]
 
-    def __init__(self, nominal: FloatArray, lower: FloatArray, upper: FloatArray) -> None:
+    def __init__(self, nominal: FloatArray, lower: FloatArray, upper: FloatArray, scale: FloatArray | None = None) -> None:
         self.nominal = np.asarray(nominal, dtype=float)
         self.lower = np.asarray(lower, dtype=float)
         self.upper = np.asarray(upper, dtype=float)
+        self.scale = self.upper - self.lower if scale is None else np.broadcast_to(np.asarray(scale, dtype=float), self.nominal.shape)
 
     @property
     def n_params(self) -> int:
@@ -133,6 +153,11 @@ class EffectTerm(ABC):
         """Starting points (k_e,) for a local fit of this term from a fit without it whose base parameters are
         ``theta_base`` (k_base,) (default: the nominal)."""
         return [self.nominal.copy()]
+
+    def grid(self, theta_base: FloatArray | None = None) -> list[FloatArray]:
+        """Candidate starts (k_e,) to score in one batched evaluation, the best of which start the local fits;
+        by default :meth:`starts` (a term whose cost is multimodal offers a scan)."""
+        return self.starts(theta_base)
 
     def from_truth(self, hidden: Mapping[str, Any]) -> FloatArray:
         """This term's unknowns (k_e,) in a simulated truth: ``hidden`` is ``truth.json``'s ``hidden_effects``.
@@ -159,22 +184,14 @@ class EffectTerm(ABC):
     def implausible(
         self, theta: FloatArray, covariance: FloatArray | None = None, theta_base: FloatArray | None = None
     ) -> list[str]:
-        """Reasons why ``theta`` (k_e,) is not physically plausible (empty if it is): by default, values on a search bound.
+        """Reasons why ``theta`` (k_e,) is not physically plausible (empty if it is); none by default.
 
-        ``covariance`` (k_e, k_e), the fit's Cramér-Rao covariance, lets a term allow for the uncertainty of its test:
-        with it, a value on its bound counts only if the data tell that bound from the nominal, i.e. the bound is
-        more than :data:`BOUND_STD` standard deviations from it. A barely informed unknown (the misalignment of a
-        gyro axis that hardly turns: std 0.011 against a bound of 0.02) reaches its bound by noise alone, and
-        that says nothing about the effect. ``theta_base`` (k_base,), the base parameters of the same fit, lets
-        a term check against them (the slosh's liquid).
+        Only physics counts, never the search range. ``covariance`` (k_e, k_e), the fit's Cramér-Rao covariance,
+        lets a term allow for the uncertainty of its test (a barely informed inertia can be slightly unphysical by
+        noise alone); ``theta_base`` (k_base,), the base parameters of the same fit, lets a term check against
+        them (the slosh's liquid).
         """
-        width = self.upper - self.lower
-        on_bound = (theta <= self.lower + 1e-6 * width) | (theta >= self.upper - 1e-6 * width)
-        on_bound &= np.abs(theta - self.nominal) > 1e-6 * width  # a nominal on a bound means "off"
-        if covariance is not None:
-            std = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
-            on_bound &= np.abs(theta - self.nominal) > BOUND_STD * std
-        return [f"{n} = {v:.4g} is on its search bound" for n, v, hit in zip(self.names, theta, on_bound, strict=True) if hit]
+        return []
 
 
 class _VectorTerm(EffectTerm):
@@ -184,21 +201,37 @@ class _VectorTerm(EffectTerm):
     bound: ClassVar[float]
     prefix: ClassVar[str]
 
+    #: the size expected in flight (see :attr:`EffectTerm.scale`)
+    typical: ClassVar[float]
+
     def __init__(self, robot: Robot) -> None:
         self.names = tuple(f"{self.prefix}_{axis}_{self.unit}" for axis in "xyz")
         self.truth_fields = ((f"{self.name}_{self.unit}", 3),)
-        super().__init__(np.zeros(3), -np.full(3, self.bound), np.full(3, self.bound))
+        bound = self.range_of(robot)
+        super().__init__(np.zeros(3), -np.full(3, bound), np.full(3, bound), np.full(3, self.typical))
+
+    @classmethod
+    def range_of(cls, robot: Robot) -> float:
+        """The search range ``+-bound`` of each component."""
+        return cls.bound
 
     def physical(self, theta: FloatArray) -> dict[str, Any]:
         return {f"{self.name}_{self.unit}": np.asarray(theta, dtype=float).copy()}
 
 
 class InitialMomentum(_VectorTerm):
-    """``l0`` (3,), N m s, base frame at the first sample; range +-2 N m s (0.3 deg/s of the base of ``paper6``)."""
+    """``l0`` (3,), N m s, base frame at the first sample.
+
+    Range ``+-`` :func:`momentum_range_nms` (5 deg/s of the full-tank base: 35 N m s on ``paper6``); typical size
+    2 N m s (0.3 deg/s of the base of ``paper6``)."""
 
     name = "initial_momentum"
     stage = "momentum"
-    unit, bound, prefix = "Nms", 2.0, "momentum"
+    unit, bound, prefix, typical = "Nms", math.nan, "momentum", 2.0
+
+    @classmethod
+    def range_of(cls, robot: Robot) -> float:
+        return momentum_range_nms(robot)
 
     def angular_momentum(self, theta: FloatArray, context: EffectContext) -> FloatArray:
         """System angular momentum in base axes (P, T, 3) for ``theta`` (P, 3)."""
@@ -208,8 +241,10 @@ class InitialMomentum(_VectorTerm):
 class ExternalTorque(EffectTerm):
     """``[l0 (3) N m s, tau (3) N m]`` (+ ``tau_rate`` (3) N m/s with ``drift``): ``L(t) = l0 + tau t + tau_rate t^2 / 2``.
 
-    Ranges: ``l0`` +-2 N m s, ``tau`` +-0.01 N m (two orders above gravity gradient on ``paper6``), ``tau_rate``
-    +-1e-4 N m/s.
+    Ranges: ``l0`` as :class:`InitialMomentum`, ``tau`` up to the torque that brings that momentum in
+    :data:`TORQUE_RANGE_WINDOW_S` (0.6 N m on ``paper6``: a thruster, not only gravity gradient), ``tau_rate`` up to
+    that torque per :data:`TORQUE_RANGE_WINDOW_S`. Typical sizes 2 N m s, 0.01 N m (two orders above gravity
+    gradient on ``paper6``) and 1e-4 N m/s.
     """
 
     name = "external_torque"
@@ -217,15 +252,18 @@ class ExternalTorque(EffectTerm):
     nests = ("initial_momentum",)
 
     def __init__(self, robot: Robot, drift: bool = False) -> None:
+        momentum = momentum_range_nms(robot)
+        torque = momentum / TORQUE_RANGE_WINDOW_S
         names = [f"momentum_{a}_Nms" for a in "xyz"] + [f"torque_{a}_Nm" for a in "xyz"]
-        bounds = [2.0] * 3 + [0.01] * 3
+        bounds, typical = [momentum] * 3 + [torque] * 3, [2.0] * 3 + [0.01] * 3
         fields = [("initial_momentum_Nms", 3), ("external_torque_Nm", 3)]
         if drift:
             names += [f"torque_rate_{a}_Nm_s" for a in "xyz"]
-            bounds += [1e-4] * 3
+            bounds += [torque / TORQUE_RANGE_WINDOW_S] * 3
+            typical += [1e-4] * 3
             fields.append(("external_torque_rate_Nm_s", 3))
         self.names, self.drift, self.truth_fields = tuple(names), drift, tuple(fields)
-        super().__init__(np.zeros(len(names)), -np.array(bounds), np.array(bounds))
+        super().__init__(np.zeros(len(names)), -np.array(bounds), np.array(bounds), np.array(typical))
 
     def angular_momentum(self, theta: FloatArray, context: EffectContext) -> FloatArray:
         """System angular momentum in base axes (P, T, 3) for ``theta`` (P, k_e)."""
@@ -247,11 +285,12 @@ class ExternalTorque(EffectTerm):
 
 
 class GyroBias(_VectorTerm):
-    """``b`` (3,), rad/s, base body frame; range +-1e-3 rad/s (200 deg/h, far beyond any navigation gyro)."""
+    """``b`` (3,), rad/s, base body frame; range +-0.05 rad/s (3 deg/s, beyond an uncalibrated MEMS gyro); typical
+    size 1e-3 rad/s (200 deg/h, far beyond any navigation gyro)."""
 
     name = "gyro_bias"
     stage = "measurement"
-    unit, bound, prefix = "rad_s", 1e-3, "bias"
+    unit, bound, prefix, typical = "rad_s", 0.05, "bias", 1e-3
 
     def measure(self, omega: FloatArray, theta: FloatArray, context: EffectContext) -> FloatArray:
         """``omega + b``: (P, T, 3)."""
@@ -259,7 +298,8 @@ class GyroBias(_VectorTerm):
 
 
 class GyroScale(EffectTerm):
-    """``E`` (3x3, row-major, 9 unknowns): ``omega_meas = (I + E) omega``; range +-0.02 (2 % scale, 20 mrad misalignment)."""
+    """``E`` (3x3, row-major, 9 unknowns): ``omega_meas = (I + E) omega``; range +-0.2 (20 % scale, 200 mrad
+    misalignment: a gyro unit mounted wrongly), typical size 0.02 (2 % scale, 20 mrad misalignment)."""
 
     name = "gyro_scale"
     stage = "measurement"
@@ -267,7 +307,7 @@ class GyroScale(EffectTerm):
     def __init__(self, robot: Robot) -> None:
         self.names = tuple(f"scale_{r}{c}" for r in "xyz" for c in "xyz")
         self.truth_fields = (("gyro_scale_misalignment", 9),)
-        super().__init__(np.zeros(9), np.full(9, -0.02), np.full(9, 0.02))
+        super().__init__(np.zeros(9), np.full(9, -0.2), np.full(9, 0.2), np.full(9, 0.02))
 
     def measure(self, omega: FloatArray, theta: FloatArray, context: EffectContext) -> FloatArray:
         """``(I + E) omega``: (P, T, 3)."""
@@ -278,7 +318,8 @@ class GyroScale(EffectTerm):
 
 
 class Delay(EffectTerm):
-    """``d`` (1,), s: the gyro reads the rate at ``t - d`` (Catmull-Rom interpolation of the prediction); range +-0.1 s.
+    """``d`` (1,), s: the gyro reads the rate at ``t - d`` (Catmull-Rom interpolation of the prediction); range
+    ``+-`` :data:`MAX_DELAY_S`, typical size 0.1 s.
 
     Before the first sample the rate is held at its first value (a log that starts at rest).
     """
@@ -289,7 +330,7 @@ class Delay(EffectTerm):
     truth_fields = (("delay_s", 1),)
 
     def __init__(self, robot: Robot) -> None:
-        super().__init__(np.zeros(1), np.array([-0.1]), np.array([0.1]))
+        super().__init__(np.zeros(1), np.array([-MAX_DELAY_S]), np.array([MAX_DELAY_S]), np.array([0.1]))
 
     def measure(self, omega: FloatArray, theta: FloatArray, context: EffectContext) -> FloatArray:
         """``omega(t - d)``: (P, T, 3), for a uniformly sampled log."""
@@ -407,8 +448,10 @@ class Slosh(EffectTerm):
     with the arm's configuration, and the slosh's feedback on its own forcing beyond ``Lambda^-1``.
     Integrated with RK4 at the log's sample period, starting at rest.
 
-    Ranges: ``m_s`` in ``[0, usable fuel]``, ``f`` in ``[0.05, 2]`` Hz, ``zeta`` in ``[0.005, 1]``; nominal
-    ``m_s = 0`` (off). Only liquid still in the tank can slosh: ``liquid_of`` gives it for the base parameters
+    Ranges: ``m_s`` in ``[0, usable fuel]``, ``f`` in ``[0.02, 2]`` Hz (periods 0.5-50 s: the first lateral mode of
+    tanks from 0.1 m to several metres, whichever equivalent model, pendulum or spring-mass, describes it),
+    ``zeta`` in ``[0.001, 1]``; nominal ``m_s = 0`` (off). The cost is multimodal in the frequency: :meth:`grid`
+    offers a log-spaced scan of the whole band to choose the local fits' starts from. Only liquid still in the tank can slosh: ``liquid_of`` gives it for the base parameters
     (with the fuel parameters, the usable fuel minus the fuel consumed; else the usable fuel). A larger ``m_s``
     moves only the liquid there is (:meth:`moving_part`; the prediction is flat in ``m_s`` beyond it) and such a
     fit is implausible: subtracting more than the liquid from the base leaves a "rest" that is not a body, whose
@@ -419,8 +462,11 @@ class Slosh(EffectTerm):
     stage = "slosh"
     names = ("slosh_mass_kg", "slosh_frequency_hz", "slosh_damping_ratio")
     truth_fields = tuple((field, 1) for field in names)
-    #: starting frequencies (Hz) of the local fits: the cost is multimodal in the frequency
+    #: starting frequencies (Hz) of the local fits without a scan (:meth:`starts`)
     START_FREQUENCIES_HZ = (0.15, 0.3, 0.6)
+    #: the scan of :meth:`grid`: frequencies (Hz, log-spaced over the search range) and sloshing fractions of the liquid
+    GRID_FREQUENCIES_HZ = tuple(float(f) for f in np.geomspace(0.02, 2.0, 19))
+    GRID_MASS_FRACTIONS = (0.05, 0.2, 0.5)
 
     def __init__(
         self,
@@ -429,7 +475,12 @@ class Slosh(EffectTerm):
         liquid_of: Callable[[FloatArray], FloatArray] | None = None,
     ) -> None:
         liquid_max_kg = float(remaining_liquid_kg(robot, 0.0))  # the usable fuel, as the simulator has it
-        super().__init__(np.array([0.0, 0.3, 0.05]), np.array([0.0, 0.05, 0.005]), np.array([liquid_max_kg, 2.0, 1.0]))
+        super().__init__(
+            np.array([0.0, 0.3, 0.05]),
+            np.array([0.0, 0.02, 0.001]),
+            np.array([liquid_max_kg, 2.0, 1.0]),
+            np.array([0.1 * liquid_max_kg, 0.3, 0.1]),
+        )
         full_com = np.asarray(robot.base_full.com_m, dtype=float)
         self.tank_of = tank_of if tank_of is not None else (lambda theta_base: np.broadcast_to(full_com, (len(theta_base), 3)))
         self.liquid_of = liquid_of if liquid_of is not None else (lambda theta_base: np.full(len(theta_base), liquid_max_kg))
@@ -448,6 +499,12 @@ class Slosh(EffectTerm):
         if theta_base is not None:
             mass = min(mass, 0.5 * float(self.liquid_of(np.atleast_2d(theta_base))[0]))
         return [np.array([mass, f, 0.05]) for f in self.START_FREQUENCIES_HZ]
+
+    def grid(self, theta_base: FloatArray | None = None) -> list[FloatArray]:
+        """:data:`GRID_FREQUENCIES_HZ` x :data:`GRID_MASS_FRACTIONS` of the liquid left for ``theta_base`` (or of the
+        usable fuel), damping 0.05: candidates to score in one batched evaluation before the local fits."""
+        liquid = self.upper[0] if theta_base is None else float(self.liquid_of(np.atleast_2d(theta_base))[0])
+        return [np.array([fraction * liquid, f, 0.05]) for f in self.GRID_FREQUENCIES_HZ for fraction in self.GRID_MASS_FRACTIONS]
 
     def momentum(
         self, twist: FloatArray, theta: FloatArray, tank_m: FloatArray, composite10: FloatArray, context: EffectContext
