@@ -376,9 +376,7 @@ def _joint_residuals(
     problem: IdentificationProblem, channel: AttitudeChannel, weights: ChannelWeights, theta: FloatArray
 ) -> FloatArray:
     """``[gyro residual / sigma_gyro; attitude residual / sigma_st]`` (6T,) at ``theta`` (k,)."""
-    return np.concatenate(
-        (problem.residuals(theta) / weights.gyro_std_rad_s, channel.residuals(theta, weights.attitude))
-    )
+    return np.concatenate((problem.residuals(theta) / weights.gyro_std_rad_s, channel.residuals(theta, weights.attitude)))
 
 
 def _joint_chi2(problem: IdentificationProblem, channel: AttitudeChannel, weights: ChannelWeights, theta: FloatArray) -> float:

@@ -114,6 +114,11 @@ class AttitudeNoise:
         """JSON-able: ``white_std_rad``, ``walk_std_rad`` and ``walk_correlation``, three each."""
         return {k: [float(v) for v in getattr(self, k)] for k in ("white_std_rad", "walk_std_rad", "walk_correlation")}
 
+    @property
+    def step_std_rad(self) -> FloatArray:
+        """The std of the wander's steps ``a`` (3,), rad: ``walk_std_rad / sqrt(1 - phi^2)``."""
+        return np.asarray(self.walk_std_rad) / np.sqrt(1.0 - np.asarray(self.walk_correlation) ** 2)
+
     def factors(self, n_steps: int) -> list[FloatArray]:
         """Per axis, the lower banded Cholesky factor (3, n_steps - 1) of the filtered differences' covariance."""
         return [
@@ -166,7 +171,9 @@ def fit_attitude_noise(differences: FloatArray) -> AttitudeNoise:
         best = None
         for phi in (0.05, 0.5, 0.95):
             start = np.array([*logs, math.log(phi / (MAX_CORRELATION - phi))])
-            result = minimize(_negative_log_likelihood, start, args=(d,), method="Nelder-Mead", options={"xatol": 1e-4, "fatol": 1e-6})
+            result = minimize(
+                _negative_log_likelihood, start, args=(d,), method="Nelder-Mead", options={"xatol": 1e-4, "fatol": 1e-6}
+            )
             if best is None or result.fun < best.fun:
                 best = result
         assert best is not None

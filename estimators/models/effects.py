@@ -137,7 +137,9 @@ class EffectTerm(ABC):
         self.nominal = np.asarray(nominal, dtype=float)
         self.lower = np.asarray(lower, dtype=float)
         self.upper = np.asarray(upper, dtype=float)
-        self.scale = self.upper - self.lower if scale is None else np.broadcast_to(np.asarray(scale, dtype=float), self.nominal.shape)
+        self.scale = (
+            self.upper - self.lower if scale is None else np.broadcast_to(np.asarray(scale, dtype=float), self.nominal.shape)
+        )
 
     @property
     def n_params(self) -> int:
