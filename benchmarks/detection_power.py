@@ -6,9 +6,9 @@ For each of the diagnosis suite's logs of ``--effect`` (same simulation, seeds a
 ``spaceid diagnose-suite``: the default, or ``--magnitude`` as its ``--magnitude effect=SIZE``), the Fisher information of the candidate model (the ``fuel`` unknowns plus the
 effect's) at the true parameters, for the documented gyro noise and, as in ``diagnose``, the star
 tracker's channel (its simulated 5 arcsec). With the fuel unknowns free, the likelihood ratio of the effect is
-non-central chi-square with ``k_e`` degrees of freedom and non-centrality ``lambda = e^T S e`` (``e`` the
-true effect, ``S`` the Schur complement of the effect's block: the information left once the fuel
-unknowns have absorbed what they can). Its power against ``diagnose``'s threshold (``alpha = 0.01``,
+non-central chi-square with ``k_e`` degrees of freedom and non-centrality ``lambda = d^T S d`` (``d`` the
+true effect minus the nearest model without it, ``S`` the Schur complement of the effect's block: the information
+left once the fuel unknowns have absorbed what they can; :mod:`estimators.diagnostics.power`). Its power against ``diagnose``'s threshold (``alpha = 0.01``,
 Bonferroni over the catalogue's candidates) is the expected fraction of such logs on which ``diagnose``'s
 test calls the effect significant: an upper bound on how often it can name it (naming also needs the lowest
 BIC, plausibility and the explained fraction; ``diagnose`` estimates the gyro noise from the residual, about
@@ -26,35 +26,22 @@ import numpy as np
 from scipy.optimize import brentq
 from scipy.stats import chi2, ncx2
 
-from estimators.diagnostics.diagnose import DEFAULT_CANDIDATES, candidate_model, diagnose
+from estimators.diagnostics import power
+from estimators.diagnostics.diagnose import DEFAULT_CANDIDATES, diagnose
 from estimators.diagnostics.suite import SUITE_EFFECTS, parse_magnitudes, simulate_case
-from estimators.models.attitude_channel import AttitudeChannel
 from estimators.problem import IdentificationModel
 from spaceid_gym.errors import SpaceIdInputError
-from spaceid_gym.sim.sensors import SensorModel
+from spaceid_gym.variations import truth_of
 
-#: ``diagnose``'s significance level, and the simulated sensors (gyro, star tracker) of the suite's logs
+#: ``diagnose``'s significance level
 ALPHA: float = inspect.signature(diagnose).parameters["alpha"].default
-SENSORS = SensorModel()
 
 
 def non_centrality(effect: str, seed: int, robot: str = "paper6", magnitude: float | None = None) -> float:
-    """``lambda`` of the effect's likelihood ratio on the suite's log of ``effect``, ``seed`` and ``magnitude`` (None: default)."""
+    """``lambda`` of the effect's likelihood ratio on the suite's log of ``effect``, ``seed`` and ``magnitude`` (None: default)
+    (:func:`estimators.diagnostics.power.non_centrality` against the ``fuel`` model)."""
     env = simulate_case(robot, effect, seed, magnitude=magnitude)
-    log, truth = env.measurement_log(), env.truth()
-    model = candidate_model(IdentificationModel(env.robot, "fuel"), effect)
-    problem = model.problem(log)
-    term = problem.parameters.terms[-1]
-    effect_true = term.from_truth(truth["hidden_effects"])
-    theta = np.concatenate(([truth["fuel_consumed_kg"]], truth["tank_position_m"], effect_true))
-    fisher = problem.fisher(theta, SENSORS.gyro_std_rad_s(env.control_period_s))
-    channel = AttitudeChannel.of(model, log)
-    if channel is not None:
-        # the attitude residual's error model at the truth: the source's noise and the model's own wander
-        fisher = fisher + channel.fisher(theta, channel.estimate_noise(theta))
-    k = problem.parameters.n_params - term.n_params
-    schur = fisher[k:, k:] - fisher[k:, :k] @ np.linalg.solve(fisher[:k, :k], fisher[:k, k:])
-    return float(effect_true @ schur @ effect_true)
+    return power.non_centrality(IdentificationModel(env.robot, "fuel"), effect, env.measurement_log(), truth_of(env))
 
 
 def main() -> None:
@@ -73,13 +60,13 @@ def main() -> None:
     except SpaceIdInputError as exc:
         parser.error(str(exc))
     size = magnitude.get(args.effect)
-    dof = candidate_model(IdentificationModel("paper6", "fuel"), args.effect).parameters.terms[-1].n_params
+    dof = power.effect_dof(IdentificationModel("paper6", "fuel"), args.effect)
     threshold = chi2.isf(ALPHA / len(DEFAULT_CANDIDATES), dof)
     powers, lambdas = [], []
     for seed in seeds:
         lam = non_centrality(args.effect, seed, magnitude=size)
         lambdas.append(lam)
-        powers.append(ncx2.sf(threshold, dof, lam))
+        powers.append(power.power_of(lam, dof, ALPHA, len(DEFAULT_CANDIDATES)))
         print(f"seed {seed:3d}: lambda {lam:9.1f}  power {powers[-1]:.2f}", flush=True)
     needed = brentq(lambda x: ncx2.sf(threshold, dof, x) - 0.9, 1e-3, 1e4)
     print(

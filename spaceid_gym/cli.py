@@ -11,7 +11,7 @@ import dataclasses
 import json
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -162,7 +162,7 @@ def _parser() -> argparse.ArgumentParser:
     ev.add_argument("--out", type=Path, required=True, help="output folder")
 
     suite = sub.add_parser("diagnose-suite", help="measure diagnose on simulated logs with each effect hidden, and on clean logs")
-    suite.add_argument("--robot", default="paper6")
+    suite.add_argument("--robot", default=None, help="robot of every log (default paper6; not with --matrix: --fix robot=...)")
     suite.add_argument("--seeds", type=int, default=20, help="logs per effect (default 20)")
     suite.add_argument("--first-seed", type=int, default=0)
     suite.add_argument("--effects", default=None, help="comma-separated hidden effects, 'none' for clean logs (default: all)")
@@ -171,6 +171,19 @@ def _parser() -> argparse.ArgumentParser:
         default=None,
         help="sizes other than the defaults, e.g. 'gyro_scale=2.6e-3,payload=20' in the units of "
         "spaceid_gym.effects.MAGNITUDE_UNITS (slosh: kg, at most the liquid left); same seeds, same directions",
+    )
+    suite.add_argument("--duration", type=float, default=60.0, help="window length per log, s (default 60)")
+    suite.add_argument(
+        "--matrix",
+        action="store_true",
+        help="the variation matrix: each log draws its robot, rate, attitude source, noise scale, excitation and effect "
+        "size from its seed (spaceid_gym.variations); writes matrix.csv, matrix.md and summary.json",
+    )
+    suite.add_argument(
+        "--fix",
+        default=None,
+        help="with --matrix: pin axes, e.g. 'robot=paper6,rate_hz=50' (axes: robot, rate_hz, attitude, noise_scale, "
+        "excitation, size_factor, slosh_model, slosh_period_s)",
     )
     suite.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
     suite.add_argument("--out", type=Path, required=True, help="output folder")
@@ -371,12 +384,11 @@ def _diagnose_or_report(args: argparse.Namespace) -> None:
 
 
 def _diagnose_suite(args: argparse.Namespace) -> int:
-    """Runs the suite and writes it; exit code 1 (after writing) if the diagnosis of any log raised."""
+    """Runs the suite (or with ``--matrix`` the variation matrix) and writes it; exit code 1 (after writing) if the
+    diagnosis of any log raised."""
     from estimators.diagnostics.suite import (
         DIAGNOSTIC_EXCITATION,
         SUITE_EFFECTS,
-        code_version,
-        failed_rows,
         parse_magnitudes,
         run_suite,
         write_suite,
@@ -384,24 +396,58 @@ def _diagnose_suite(args: argparse.Namespace) -> int:
 
     if args.jobs < 1 or args.seeds < 1:
         raise SpaceIdInputError(f"--jobs and --seeds: expected at least 1, got {args.jobs} and {args.seeds}")
+    if not (np.isfinite(args.duration) and args.duration > 0.0):
+        raise SpaceIdInputError(f"--duration: expected a positive number of seconds, got {args.duration!r}")
     effects = SUITE_EFFECTS if args.effects is None else tuple(e.strip() for e in args.effects.split(",") if e.strip())
     unknown = [e for e in effects if e not in SUITE_EFFECTS]
     if unknown:
         raise SpaceIdInputError(f"--effects: unknown {unknown}; expected names from {', '.join(SUITE_EFFECTS)}")
-    magnitudes = parse_magnitudes(args.magnitude, effects, args.robot, range(args.first_seed, args.first_seed + args.seeds))
-    start, version = time.perf_counter(), code_version()  # the code that runs, read before it runs
-    rows = run_suite(args.robot, effects, args.seeds, args.first_seed, args.jobs, magnitudes=magnitudes)
-    info = {
-        "robot": args.robot,
-        "seeds": args.seeds,
-        "first_seed": args.first_seed,
-        "effects": list(effects),
-        "magnitudes": magnitudes,
-        "excitation": DIAGNOSTIC_EXCITATION,
-        "code_version": version,
-        "wall_time_s": time.perf_counter() - start,
-    }
-    paths = write_suite(args.out, rows, info)
+    if not effects:
+        raise SpaceIdInputError(f"--effects: expected at least one of {', '.join(SUITE_EFFECTS)}")
+    runs = {"seeds": args.seeds, "first_seed": args.first_seed, "effects": list(effects), "duration_s": args.duration}
+    if args.matrix:
+        return _diagnose_matrix(args, effects, runs)
+    if args.fix is not None:
+        raise SpaceIdInputError("--fix: pins axes of the variation matrix; give --matrix too")
+    robot = args.robot or "paper6"
+    magnitudes = parse_magnitudes(args.magnitude, effects, robot, range(args.first_seed, args.first_seed + args.seeds))
+    info: dict[str, object] = {"robot": robot, **runs, "magnitudes": magnitudes, "excitation": DIAGNOSTIC_EXCITATION}
+    rows = _timed_run(info, lambda: run_suite(robot, effects, args.seeds, args.first_seed, args.jobs, args.duration, magnitudes))
+    return _report_suite(rows, write_suite(args.out, rows, info), info)
+
+
+def _timed_run(info: dict[str, object], run: Callable[[], list[dict[str, object]]]) -> list[dict[str, object]]:
+    """``run()``'s rows; adds the code's version (read before it runs) and the wall time to ``info``."""
+    from estimators.diagnostics.suite import code_version
+
+    start = time.perf_counter()
+    info["code_version"] = code_version()
+    rows = run()
+    info["wall_time_s"] = time.perf_counter() - start
+    return rows
+
+
+def _diagnose_matrix(args: argparse.Namespace, effects: tuple[str, ...], runs: dict[str, object]) -> int:
+    """``diagnose-suite --matrix``: the variation matrix, written to ``--out`` (``runs``: the seeds, effects and
+    duration, for ``summary.json``)."""
+    from estimators.diagnostics.suite import run_matrix, write_matrix
+    from spaceid_gym.variations import AXIS_RANGES, AXIS_VALUES, parse_fixed
+
+    if args.robot is not None or args.magnitude is not None:
+        raise SpaceIdInputError("--robot and --magnitude: not with --matrix, whose logs draw them (pin with --fix robot=...)")
+    try:
+        fixed = parse_fixed(args.fix)
+    except SpaceIdInputError as exc:
+        raise SpaceIdInputError(f"--fix: {exc}") from None
+    info: dict[str, object] = {"matrix": True, **runs, "fixed": fixed, "axis_values": AXIS_VALUES, "axis_ranges": AXIS_RANGES}
+    rows = _timed_run(info, lambda: run_matrix(effects, args.seeds, args.first_seed, args.jobs, args.duration, fixed))
+    return _report_suite(rows, write_matrix(args.out, rows, info), info)
+
+
+def _report_suite(rows: list[dict[str, object]], paths: dict[str, Path], info: dict[str, object]) -> int:
+    """Print the table and the logs that failed; exit code 1 if any did."""
+    from estimators.diagnostics.suite import failed_rows
+
     print(paths["table"].read_text())
     print(f"{len(rows)} logs in {info['wall_time_s']:.0f} s; wrote {', '.join(p.name for p in paths.values())}")
     failed = failed_rows(rows)
@@ -410,7 +456,9 @@ def _diagnose_suite(args: argparse.Namespace) -> int:
             f"spaceid: error: diagnosis of the {row['effect']} log of seed {row['seed']} raised {row['error']}", file=sys.stderr
         )
     if failed:
-        print(f"spaceid: error: {len(failed)} of {len(rows)} logs failed (verdict 'error' in suite.csv)", file=sys.stderr)
+        print(
+            f"spaceid: error: {len(failed)} of {len(rows)} logs failed (verdict 'error' in {paths['csv'].name})", file=sys.stderr
+        )
     return 1 if failed else 0
 
 

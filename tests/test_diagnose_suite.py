@@ -8,19 +8,10 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from suite_rows import diagnosed_row
 
 from estimators.diagnostics import suite
 from spaceid_gym.cli import main
-
-
-def _row(effect: str, seed: int) -> dict[str, Any]:
-    """A diagnosed log's row as :func:`suite.run_case` returns it (correct verdict, figures at the noise)."""
-    row: dict[str, Any] = {"effect": effect, "seed": seed, "verdict": effect, "correct": True, "runner_up": ""}
-    row.update(rms_over_noise_before=1.5, rms_over_noise_after=1.02, wall_time_s=0.1)
-    for name in ("mdf", "bx", "by", "bz"):
-        for when in ("before", "after"):
-            row[f"z_{name}_{when}"] = row[f"z_{name}_{when}_at_estimate"] = 1.0
-    return row
 
 
 def _fake_case(
@@ -28,7 +19,7 @@ def _fake_case(
 ) -> dict[str, Any]:
     if seed == 1:
         raise ZeroDivisionError("division by zero")
-    return _row(effect, seed)
+    return diagnosed_row(effect, seed)
 
 
 def test_a_failing_log_is_recorded_and_the_command_fails(
@@ -53,17 +44,19 @@ def test_a_failing_log_is_recorded_and_the_command_fails(
 
 
 def test_a_suite_without_failures_exits_zero(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
-    monkeypatch.setattr(suite, "run_case", lambda robot, effect, seed, duration_s=60.0, magnitude=None: _row(effect, seed))
+    monkeypatch.setattr(
+        suite, "run_case", lambda robot, effect, seed, duration_s=60.0, magnitude=None: diagnosed_row(effect, seed)
+    )
     assert main(["diagnose-suite", "--seeds", "2", "--effects", "none,delay", "--out", str(tmp_path)]) == 0
     assert "| delay | 2 | 100 % |" in (tmp_path / "table.md").read_text()
 
 
-def test_magnitudes_reach_the_simulation_and_name_the_row(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+def test_magnitudes_reach_the_simulation_and_name_thediagnosed_row(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     sizes: list[tuple[str, float | None]] = []
 
     def fake(robot: str, effect: str, seed: int, duration_s: float = 60.0, magnitude: float | None = None) -> dict[str, Any]:
         sizes.append((effect, magnitude))
-        return _row(effect, seed) | {"magnitude": "default" if magnitude is None else magnitude}
+        return diagnosed_row(effect, seed) | {"magnitude": "default" if magnitude is None else magnitude}
 
     monkeypatch.setattr(suite, "run_case", fake)
     args = ["diagnose-suite", "--seeds", "1", "--effects", "none,gyro_scale", "--magnitude", "gyro_scale=2.6e-3"]
@@ -123,7 +116,7 @@ def test_a_size_one_log_cannot_have_is_refused_before_anything_runs(tmp_path: Pa
 
 
 def test_the_summary_keeps_sizes_apart_and_labels_them_with_their_unit() -> None:
-    rows = [_row("payload", 0) | {"magnitude": "default"}, _row("payload", 1) | {"magnitude": 20.0}]
+    rows = [diagnosed_row("payload", 0) | {"magnitude": "default"}, diagnosed_row("payload", 1) | {"magnitude": 20.0}]
     rows[1]["correct"] = False
     summary = suite.summarise(rows)
     assert [(s["magnitude"], s["correct_percent"]) for s in summary] == [("default", 100.0), (20.0, 0.0)]

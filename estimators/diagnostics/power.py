@@ -1,0 +1,103 @@
+"""Expected detection power: how often can ``diagnose``'s likelihood-ratio test call a hidden effect significant?
+
+On a simulated log with one effect hidden, the Fisher information of the candidate model (the model's unknowns
+plus the effect's) at the true parameters, from the gyro (white noise of the per-sample std recorded in the
+truth's sensor settings, ``truth["noise"]["gyro_std_rad_s"]`` as in truth.json) and, when the log has an attitude
+source, from the attitude channel (:class:`~estimators.models.attitude_channel.AttitudeChannel`, its error model
+fitted at the truth, as ``diagnose`` fits it). With the model's own unknowns free, the effect's likelihood ratio is
+non-central chi-square with ``k_e`` degrees of freedom (the effect's unknowns) and non-centrality
+``lambda = d^T S d``: ``S`` the Schur complement of the effect's block (the information left once the other unknowns
+have absorbed what they can), ``d`` the effect's true unknowns minus the nearest point without the effect (the
+term's nominal, except the unknowns that only exist with the effect, :data:`ONLY_WITH_EFFECT`, which stay at the
+truth: a slosh without mass has no frequency, and the nearest such model to the truth is the true frequency and
+damping with zero mass). The power against the test's threshold (``alpha`` Bonferroni-divided over
+``n_candidates``) is ``ncx2.sf(chi2.isf(alpha / n_candidates, k_e), k_e, lambda)``: an upper bound on how often
+``diagnose`` can name the effect (naming also needs the lowest BIC, plausibility and the explained fraction).
+Local approximation: the Fisher information at the truth.
+
+The pendulum slosh (``slosh_model = "pendulum"``) has no term of its own: the identification model's slosh term is
+the spring-mass, and the pendulum's truth fields (``slosh_mass_kg``, ``slosh_frequency_hz``,
+``slosh_damping_ratio``, whose small-angle lateral force is the spring's) are used as the approximate truth of that
+term; the power is then that of a spring-mass of the same size, an approximation (the pendulum's mass cannot move
+along its rod).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from scipy.stats import chi2, ncx2
+
+from estimators.diagnostics.diagnose import DEFAULT_CANDIDATES, candidate_model
+from estimators.diagnostics.workflow import true_parameters
+from estimators.models.attitude_channel import AttitudeChannel
+from estimators.problem import IdentificationModel
+from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.log import MeasurementLog
+
+#: per effect, its unknowns that exist only when the effect does (they keep their true values in the nearest model
+#: without the effect)
+ONLY_WITH_EFFECT: dict[str, tuple[str, ...]] = {"slosh": ("slosh_frequency_hz", "slosh_damping_ratio")}
+
+
+def non_centrality(model_without_effect: IdentificationModel, effect: str, log: MeasurementLog, truth: dict[str, Any]) -> float:
+    """``lambda`` of ``effect``'s likelihood ratio against ``model_without_effect`` on ``log``, at ``truth``
+    (truth.json's keys: the fuel state, ``hidden_effects`` and ``noise["gyro_std_rad_s"]``); see the module docstring.
+
+    Raises:
+        SpaceIdInputError: the truth lacks the model's unknowns or the gyro's noise, or the model already has ``effect``.
+    """
+    if effect in {spec.partition("[")[0] for spec in model_without_effect.effects}:
+        raise SpaceIdInputError(f"expected power: the model already has the effect {effect!r}")
+    model = candidate_model(model_without_effect, effect)
+    theta = true_parameters(model, truth)
+    if theta is None:
+        raise SpaceIdInputError("expected power: needs the fuel unknowns in the model and the fuel state in the truth")
+    gyro_std = (truth.get("noise") or {}).get("gyro_std_rad_s")
+    if gyro_std is None:
+        raise SpaceIdInputError("expected power: the truth has no gyro noise (noise.gyro_std_rad_s, as in truth.json)")
+    problem = model.problem(log)
+    term = problem.parameters.terms[-1]
+    k = problem.parameters.n_params - term.n_params
+    effect_off = term.nominal.copy()
+    for name in ONLY_WITH_EFFECT.get(effect, ()):
+        index = term.names.index(name)
+        effect_off[index] = theta[k + index]
+    fisher = problem.fisher(theta, float(gyro_std))
+    channel = AttitudeChannel.of(model, log)
+    if channel is not None:
+        # the attitude residual's error model at the truth: the source's noise and the model's own wander
+        fisher = fisher + channel.fisher(theta, channel.estimate_noise(theta))
+    schur = fisher[k:, k:] - fisher[k:, :k] @ np.linalg.solve(fisher[:k, :k], fisher[:k, k:])
+    shift = theta[k:] - effect_off
+    return float(shift @ schur @ shift)
+
+
+def power_of(lam: float, dof: int, alpha: float = 0.01, n_candidates: int = len(DEFAULT_CANDIDATES)) -> float:
+    """The power of a chi-square test with ``dof`` degrees of freedom at level ``alpha / n_candidates`` against a
+    non-centrality ``lam``: ``ncx2.sf(chi2.isf(alpha / n_candidates, dof), dof, lam)``."""
+    if not 0.0 < alpha < 1.0 or n_candidates < 1 or dof < 1:
+        raise SpaceIdInputError(
+            f"expected power: expected 0 < alpha < 1, n_candidates >= 1, dof >= 1, got {alpha}, {n_candidates}, {dof}"
+        )
+    return float(ncx2.sf(chi2.isf(alpha / n_candidates, dof), dof, max(lam, 0.0)))
+
+
+def effect_dof(model_without_effect: IdentificationModel, effect: str) -> int:
+    """The effect's unknowns ``k_e``: the degrees of freedom of its likelihood ratio."""
+    return candidate_model(model_without_effect, effect).parameters.terms[-1].n_params
+
+
+def expected_power(
+    model_without_effect: IdentificationModel,
+    effect: str,
+    log: MeasurementLog,
+    truth: dict[str, Any],
+    alpha: float = 0.01,
+    n_candidates: int = len(DEFAULT_CANDIDATES),
+) -> float:
+    """The expected power of ``diagnose``'s test of ``effect`` on ``log`` (see the module docstring):
+    :func:`power_of` of :func:`non_centrality`."""
+    lam = non_centrality(model_without_effect, effect, log, truth)
+    return power_of(lam, effect_dof(model_without_effect, effect), alpha, n_candidates)
