@@ -568,6 +568,28 @@ def _cross(ax: float, ay: float, az: float, bx: float, by: float, bz: float) -> 
     return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
 
 
+@njit(cache=True, inline="always")
+def _oscillator_slope(
+    coupling: FloatArray,
+    p: int,
+    stiff: float,
+    damp: float,
+    point: FloatArray,
+    force: FloatArray,
+    row: int,
+    slopes: FloatArray,
+    s: int,
+) -> None:
+    """``slopes[s]`` = the derivative ``[x'; -A (stiff x + damp x') - f]`` of the slosh oscillator at ``point`` = ``[x; x']``
+    (6,), with ``A = coupling[p]`` and the forcing ``f = force[row]`` (see :func:`_slosh_momentum`)."""
+    s0 = stiff * point[0] + damp * point[3]
+    s1 = stiff * point[1] + damp * point[4]
+    s2 = stiff * point[2] + damp * point[5]
+    for c in range(3):
+        slopes[s, c] = point[3 + c]
+        slopes[s, 3 + c] = -(coupling[p, c, 0] * s0 + coupling[p, c, 1] * s1 + coupling[p, c, 2] * s2) - force[row, c]
+
+
 @njit(cache=True)
 def _slosh_momentum(
     twist: FloatArray,
@@ -583,6 +605,8 @@ def _slosh_momentum(
     out = np.zeros((n_p, n_t, 6))
     moved = np.zeros((n_p, n_t, 10))
     accel = np.empty((n_t, 3))
+    # RK4 scratch: the state [x; x'], the point of a stage, the four slopes, the forcing at a step's start/middle/end
+    state, stage, slopes, force = np.empty(6), np.empty(6), np.empty((4, 6)), np.empty((3, 3))
     for p in range(n_p):
         rx, ry, rz = tank[p, 0], tank[p, 1], tank[p, 2]
         # tank acceleration (base axes) from the twist, derivatives by central differences
@@ -610,24 +634,22 @@ def _slosh_momentum(
         # the tank, by Lambda^-1 F, so the relative motion sees the inverse mass A = E / m_s + Lambda^-1;
         # with k = m_s w^2 and c = 2 zeta m_s w: A (k x + c x') = (E + m_s Lambda^-1) (w^2 x + 2 zeta w x')
         stiff, damp = omega_n[p] ** 2, 2.0 * zeta[p] * omega_n[p]
-        a_mat = coupling[p]
-        x, xd = np.zeros(3), np.zeros(3)
+        state[:] = 0.0
         out[p, 0, :] = 0.0
         for k in range(1, n_t):
             h = t_s[k] - t_s[k - 1]
-            f0, f1 = accel[k - 1], accel[k]
-            fm = 0.5 * (f0 + f1)
-            k1x, k1v = xd, -a_mat @ (stiff * x + damp * xd) - f0
-            x2, v2 = x + 0.5 * h * k1x, xd + 0.5 * h * k1v
-            k2x, k2v = v2, -a_mat @ (stiff * x2 + damp * v2) - fm
-            x3, v3 = x + 0.5 * h * k2x, xd + 0.5 * h * k2v
-            k3x, k3v = v3, -a_mat @ (stiff * x3 + damp * v3) - fm
-            x4, v4 = x + h * k3x, xd + h * k3v
-            k4x, k4v = v4, -a_mat @ (stiff * x4 + damp * v4) - f1
-            x = x + (h / 6.0) * (k1x + 2.0 * k2x + 2.0 * k3x + k4x)
-            xd = xd + (h / 6.0) * (k1v + 2.0 * k2v + 2.0 * k3v + k4v)
-            out[p, k, :3] = x  # displacement for now; momentum below
-            out[p, k, 3:] = xd
+            for c in range(3):  # the forcing at the step's start, middle and end
+                force[0, c], force[2, c] = accel[k - 1, c], accel[k, c]
+                force[1, c] = 0.5 * (force[0, c] + force[2, c])
+            _oscillator_slope(coupling, p, stiff, damp, state, force, 0, slopes, 0)
+            for s in range(1, 4):
+                fraction = 1.0 if s == 3 else 0.5
+                for i in range(6):
+                    stage[i] = state[i] + fraction * h * slopes[s - 1, i]
+                _oscillator_slope(coupling, p, stiff, damp, stage, force, 1 if s < 3 else 2, slopes, s)
+            for i in range(6):
+                state[i] = state[i] + (h / 6.0) * (slopes[0, i] + 2.0 * slopes[1, i] + 2.0 * slopes[2, i] + slopes[3, i])
+                out[p, k, i] = state[i]  # displacement and its rate for now; momentum below
         for k in range(n_t):
             x0, x1, x2_ = out[p, k, 0], out[p, k, 1], out[p, k, 2]
             v0, v1, v2_ = out[p, k, 3], out[p, k, 4], out[p, k, 5]

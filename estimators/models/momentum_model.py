@@ -222,8 +222,13 @@ class MomentumModel:
 
 @njit(cache=True, inline="always")
 def _rate_of_composite(
-    mass: float, hx: float, hy: float, hz: float, j: FloatArray, momentum: FloatArray, out: FloatArray
-) -> None:
+    mass: float,
+    hx: float,
+    hy: float,
+    hz: float,
+    j: tuple[float, float, float, float, float, float],
+    momentum: tuple[float, float, float, float, float, float],
+) -> tuple[float, float, float]:
     """``omega`` of a composite (mass, first moment h, inertia entries j about the origin) with momentum ``-h_arm``."""
     cx, cy, cz = hx / mass, hy / mass, hz / mass  # composite CoM, base frame
     # composite inertia about its CoM, Ic = J - m S(c): [[a b e] [b d f] [e f g]]
@@ -241,25 +246,45 @@ def _rate_of_composite(
     c00, c01, c02 = d * g - f * f, e * f - b * g, b * f - d * e
     c11, c12, c22 = a * g - e * e, b * e - a * f, a * d - b * b
     inv_det = 1.0 / (a * c00 + b * c01 + e * c02)
-    out[0] = (c00 * rx + c01 * ry + c02 * rz) * inv_det
-    out[1] = (c01 * rx + c11 * ry + c12 * rz) * inv_det
-    out[2] = (c02 * rx + c12 * ry + c22 * rz) * inv_det
+    return (
+        (c00 * rx + c01 * ry + c02 * rz) * inv_det,
+        (c01 * rx + c11 * ry + c12 * rz) * inv_det,
+        (c02 * rx + c12 * ry + c22 * rz) * inv_det,
+    )
 
 
 @njit(cache=True, inline="always")
 def _twist_of_composite(
-    mass: float, hx: float, hy: float, hz: float, j: FloatArray, momentum: FloatArray, out: FloatArray
+    mass: float, hx: float, hy: float, hz: float, j: FloatArray, momentum: FloatArray, out: FloatArray, i: int, t: int
 ) -> None:
-    """``[v; omega]`` (6,) of a composite that carries ``-momentum`` (see :func:`_rate_of_composite`).
+    """``out[i, t]`` = ``[v; omega]`` (6,) of a composite that carries ``-momentum`` (6,) (see :func:`_rate_of_composite`;
+    ``j`` (6,) the inertia entries).
 
     ``P = m (v + omega x c)`` gives ``v = P / m - omega x c`` with ``P = -momentum[:3]``.
     """
-    _rate_of_composite(mass, hx, hy, hz, j, momentum, out[3:])
+    wx, wy, wz = _rate_of_composite(
+        mass,
+        hx,
+        hy,
+        hz,
+        (j[0], j[1], j[2], j[3], j[4], j[5]),
+        (momentum[0], momentum[1], momentum[2], momentum[3], momentum[4], momentum[5]),
+    )
     cx, cy, cz = hx / mass, hy / mass, hz / mass
-    wx, wy, wz = out[3], out[4], out[5]
-    out[0] = -momentum[0] / mass - (wy * cz - wz * cy)
-    out[1] = -momentum[1] / mass - (wz * cx - wx * cz)
-    out[2] = -momentum[2] / mass - (wx * cy - wy * cx)
+    out[i, t, 0] = -momentum[0] / mass - (wy * cz - wz * cy)
+    out[i, t, 1] = -momentum[1] / mass - (wz * cx - wx * cz)
+    out[i, t, 2] = -momentum[2] / mass - (wx * cy - wy * cx)
+    out[i, t, 3], out[i, t, 4], out[i, t, 5] = wx, wy, wz
+
+
+@njit(cache=True, inline="always")
+def _add_product(out: FloatArray, matrix: FloatArray, vector: FloatArray) -> None:
+    """``out += matrix @ vector`` for a small matrix (n, m), without allocating."""
+    for r in range(matrix.shape[0]):
+        total = 0.0
+        for c in range(matrix.shape[1]):
+            total += matrix[r, c] * vector[c]
+        out[r] += total
 
 
 @njit(cache=True)
@@ -286,19 +311,23 @@ def _base_twist(
     comp = np.empty(10)
     for i in range(n_p):
         for t in range(n_t):
-            comp[:] = params10[i]
-            h[:] = momentum[t]
+            for k in range(10):
+                comp[k] = params10[i, k]
+            for k in range(6):
+                h[k] = momentum[t, k]
             if with_payload:
-                comp += to_base[t] @ payload10[i]
-                h += momentum_map[t] @ payload10[i]
+                _add_product(comp, to_base[t], payload10[i])
+                _add_product(h, momentum_map[t], payload10[i])
             if with_extra:
-                h -= extra[i, t]
+                for k in range(6):
+                    h[k] -= extra[i, t, k]
             if with_moving:
-                comp += moving[i, t]
+                for k in range(10):
+                    comp[k] += moving[i, t, k]
             for k in range(6):
                 j[k] = comp[4 + k] + inertia6[t, k]
             _twist_of_composite(
-                comp[0] + arm_mass, comp[1] + first[t, 0], comp[2] + first[t, 1], comp[3] + first[t, 2], j, h, out[i, t]
+                comp[0] + arm_mass, comp[1] + first[t, 0], comp[2] + first[t, 1], comp[3] + first[t, 2], j, h, out, i, t
             )
     return out
 
@@ -310,19 +339,22 @@ def _base_rate(
     """``omega`` (P, T, 3) for base parameters (P, 10) and per-sample arm terms (T, ...)."""
     n_p, n_t = params10.shape[0], first.shape[0]
     out = np.empty((n_p, n_t, 3))
-    j = np.empty(6)
     for i in range(n_p):
         mass = params10[i, 0] + arm_mass
         for t in range(n_t):
-            for k in range(6):
-                j[k] = params10[i, 4 + k] + inertia6[t, k]
-            _rate_of_composite(
+            out[i, t, 0], out[i, t, 1], out[i, t, 2] = _rate_of_composite(
                 mass,
                 params10[i, 1] + first[t, 0],
                 params10[i, 2] + first[t, 1],
                 params10[i, 3] + first[t, 2],
-                j,
-                momentum[t],
-                out[i, t],
+                (
+                    params10[i, 4] + inertia6[t, 0],
+                    params10[i, 5] + inertia6[t, 1],
+                    params10[i, 6] + inertia6[t, 2],
+                    params10[i, 7] + inertia6[t, 3],
+                    params10[i, 8] + inertia6[t, 4],
+                    params10[i, 9] + inertia6[t, 5],
+                ),
+                (momentum[t, 0], momentum[t, 1], momentum[t, 2], momentum[t, 3], momentum[t, 4], momentum[t, 5]),
             )
     return out
