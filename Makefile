@@ -1,6 +1,7 @@
 # Two commands do all the set-up (a virtualenv in .venv, installed on first use):
 #   make demo   - the demonstration of the whole loop on the built-in robot
 #   make test   - the test suite
+#   make docs   - build the documentation site into site/ (mkdocs build --strict)
 # The virtualenv is installed from requirements.lock: the exact versions (and hashes) of every
 # package of the [all] extra that the tests last passed with; the project itself goes in after it
 # with --no-deps. After a change to the dependencies in pyproject.toml:
@@ -14,7 +15,7 @@ STAMP := $(VENV)/.installed
 LOCK := requirements.lock
 LOCK_ARGS ?=
 
-.PHONY: demo test lint bench install lock
+.PHONY: demo test lint docs bench install lock
 
 # torch in the lock is the CPU build, torch==2.13.0+cpu, from the local wheel in /opt/wheels (the
 # --find-links line and the hash in the lock are that file's): any other torch spec pulls several
@@ -46,6 +47,10 @@ test: $(STAMP)
 lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
+
+# the documentation site (docs/, mkdocs.yml) into site/; --strict: a broken link, anchor or API reference fails
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --site-dir site
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/env_steps.py
