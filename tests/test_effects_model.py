@@ -10,6 +10,7 @@ import pytest
 from agents.excitation import FourierExcitation
 from estimators.models.attitude_channel import AttitudeChannel, midpoint_log
 from estimators.models.effects import EFFECT_TERMS, make_terms, parse_effects
+from estimators.models.fractional_delay import delay_samples
 from estimators.problem import IdentificationModel
 from spaceid_gym.datasets import simulate_episode
 from spaceid_gym.effects import HiddenEffects, draw_effect
@@ -43,16 +44,32 @@ def test_model_reproduces_the_simulated_effect(paper6: Robot, name: str) -> None
     assert np.abs(problem.residuals(without)).max() > 1e-6
 
 
-def test_fractional_delay_is_interpolated_well_below_the_noise(paper6: Robot) -> None:
-    """A delay between samples is interpolated (Catmull-Rom): RMS error under 5 % of the gyro noise (1.44e-4 rad/s)
-    and, past the first three samples (the start from rest is a kink the interpolation cannot see), under 10 %."""
+def test_fractional_delay_is_reproduced_well_below_the_noise(paper6: Robot) -> None:
+    """A delay between samples (13 ms at 100 Hz) against the simulator's delayed gyro: RMS error under 10 % of the gyro
+    noise (1.44e-4 rad/s: the error adds under 1 % to the residual's variance), past the first second as well (the
+    start from rest is a kink whose band-limited delay rings) with every sample under half the noise; without the
+    delay the error is 8 times larger (the delay explains over 98 % of the effect's variance)."""
     log = _noise_free(paper6, HiddenEffects(delay_s=0.013))
     problem = IdentificationModel(paper6, "fuel", effects="delay").problem(log)
     error = problem.residuals(np.concatenate((THETA, [0.013])))
     undelayed = problem.residuals(np.concatenate((THETA, [0.0])))
-    assert np.sqrt(np.mean(error**2)) < 0.05 * 1.44e-4
-    assert np.abs(error[9:]).max() < 0.1 * 1.44e-4
-    assert np.sqrt(np.mean(undelayed**2)) > 20 * np.sqrt(np.mean(error**2))
+    settled = error.reshape(-1, 3)[100:]
+    assert np.sqrt(np.mean(error**2)) < 0.1 * 1.44e-4
+    assert np.sqrt(np.mean(settled**2)) < 0.1 * 1.44e-4
+    assert np.abs(settled).max() < 0.5 * 1.44e-4
+    assert np.sqrt(np.mean(undelayed**2)) > 8 * np.sqrt(np.mean(error**2))
+
+
+@pytest.mark.parametrize("lag", [0.25, 0.5, -0.3, 7.6])
+def test_the_delay_is_all_pass_so_it_cannot_smooth_the_predictions_noise(lag: float) -> None:
+    """White noise keeps its variance through the delay (a Catmull-Rom interpolation at a quarter sample keeps 81 %),
+    and a sine inside the band is delayed exactly."""
+    noise = np.random.default_rng(3).standard_normal((2, 20000, 3))
+    assert delay_samples(noise, np.full(2, lag)).var() == pytest.approx(noise.var(), rel=2e-3)
+    t = np.arange(4000.0)
+    sine = np.sin(2 * np.pi * 0.01 * t)[None, :, None]
+    delayed = delay_samples(sine, np.array([lag]))[0, 200:-200, 0]
+    np.testing.assert_allclose(delayed, np.sin(2 * np.pi * 0.01 * (t[200:-200] - lag)), atol=1e-4)
 
 
 def test_slosh_model_explains_most_of_the_simulated_slosh(paper6: Robot) -> None:

@@ -51,6 +51,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from estimators.models.fractional_delay import delay_samples
 from spaceid_gym.effects import remaining_liquid_kg
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.log import MeasurementLog
@@ -320,10 +321,12 @@ class GyroScale(EffectTerm):
 
 
 class Delay(EffectTerm):
-    """``d`` (1,), s: the gyro reads the rate at ``t - d`` (Catmull-Rom interpolation of the prediction); range
-    ``+-`` :data:`MAX_DELAY_S`, typical size 0.1 s.
+    """``d`` (1,), s: the gyro reads the rate at ``t - d``; range ``+-`` :data:`MAX_DELAY_S`, typical size 0.1 s.
 
-    Before the first sample the rate is held at its first value (a log that starts at rest).
+    The prediction is delayed by an all-pass phase ramp (:func:`~estimators.models.fractional_delay.delay_samples`),
+    not by interpolation between samples: an interpolator also smooths the white noise the prediction carries from
+    the joint-rate sensors, and a fit would take that smoothing for a delay of a fraction of a sample. Before the
+    first sample the rate is held at its first value (a log that starts at rest).
     """
 
     name = "delay"
@@ -338,32 +341,10 @@ class Delay(EffectTerm):
         """``omega(t - d)``: (P, T, 3), for a uniformly sampled log."""
         t = context.t_s
         dt = (t[-1] - t[0]) / (len(t) - 1)
-        return _shift(omega, theta[:, 0] / dt)
+        return delay_samples(omega, theta[:, 0] / dt)
 
     def physical(self, theta: FloatArray) -> dict[str, Any]:
         return {"delay_s": float(theta[0])}
-
-
-@njit(cache=True)
-def _shift(x: FloatArray, lag: FloatArray) -> FloatArray:
-    """``x`` (P, T, C) read ``lag[p]`` samples earlier (fractional, Catmull-Rom; clamped at the ends)."""
-    n_p, n_t, n_c = x.shape
-    out = np.empty_like(x)
-    for p in range(n_p):
-        for t in range(n_t):
-            s = t - lag[p]
-            k = int(np.floor(s))
-            u = s - k
-            i0, i1, i2, i3 = k - 1, k, k + 1, k + 2
-            i0, i1 = min(max(i0, 0), n_t - 1), min(max(i1, 0), n_t - 1)
-            i2, i3 = min(max(i2, 0), n_t - 1), min(max(i3, 0), n_t - 1)
-            w0 = ((-u + 2.0) * u - 1.0) * u * 0.5
-            w1 = ((3.0 * u - 5.0) * u * u + 2.0) * 0.5
-            w2 = ((-3.0 * u + 4.0) * u + 1.0) * u * 0.5
-            w3 = (u - 1.0) * u * u * 0.5
-            for c in range(n_c):
-                out[p, t, c] = w0 * x[p, i0, c] + w1 * x[p, i1, c] + w2 * x[p, i2, c] + w3 * x[p, i3, c]
-    return out
 
 
 class Payload(EffectTerm):
