@@ -24,7 +24,9 @@ from spaceid_gym.arm.cli_commands import (
     add_arm_simulate_arguments,
 )
 from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.limits import check_count, check_log_size, max_jobs
 from spaceid_gym.sim.sensors import ARCSEC_RAD, ATTITUDE_SOURCES, SensorModel
+from spaceid_gym.variations import AXIS_VALUES
 
 
 def _vector3(text: str) -> np.ndarray:
@@ -242,6 +244,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (SpaceIdInputError, OSError) as exc:
         print(f"spaceid: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print("spaceid: interrupted; files are written whole at the end, so none was left half-written", file=sys.stderr)
+        return 130
     return 0
 
 
@@ -255,6 +260,7 @@ def _simulate(args: argparse.Namespace) -> None:
         raise SpaceIdInputError(f"--rate: expected a positive rate in Hz, got {args.rate!r}")
     sensors = _sensor_model(args)
     robot = load_robot(args.robot)
+    check_log_size(args.duration, 1.0 / args.rate, robot.n_joints, "--duration")
     tank = (
         args.tank
         if args.tank is not None
@@ -394,10 +400,11 @@ def _diagnose_suite(args: argparse.Namespace) -> int:
         write_suite,
     )
 
-    if args.jobs < 1 or args.seeds < 1:
-        raise SpaceIdInputError(f"--jobs and --seeds: expected at least 1, got {args.jobs} and {args.seeds}")
-    if not (np.isfinite(args.duration) and args.duration > 0.0):
-        raise SpaceIdInputError(f"--duration: expected a positive number of seconds, got {args.duration!r}")
+    check_count(args.jobs, "--jobs", max_jobs())
+    check_count(args.seeds, "--seeds")
+    if args.first_seed < 0:
+        raise SpaceIdInputError(f"--first-seed: expected an integer >= 0, got {args.first_seed}")
+    check_log_size(args.duration, 1.0 / max(AXIS_VALUES["rate_hz"]), 7, "--duration")  # the matrix's fastest, largest
     effects = SUITE_EFFECTS if args.effects is None else tuple(e.strip() for e in args.effects.split(",") if e.strip())
     unknown = [e for e in effects if e not in SUITE_EFFECTS]
     if unknown:
@@ -479,12 +486,12 @@ def _evaluate(args: argparse.Namespace) -> None:
     from estimators.evaluation import draw_settings, parse_estimator_specs, run_evaluation, settings_info, write_results
     from spaceid_gym.robots import load_robot
 
-    if args.jobs < 1:
-        raise SpaceIdInputError(f"--jobs: expected at least 1, got {args.jobs}")
-    if not (np.isfinite(args.duration) and args.duration > 0):
-        raise SpaceIdInputError(f"--duration: expected a positive number of seconds, got {args.duration!r}")
+    check_count(args.settings, "--settings")
+    check_count(args.jobs, "--jobs", max_jobs())
+    robot = load_robot(args.robot)
+    check_log_size(args.duration, 0.02, robot.n_joints, "--duration")
     specs = parse_estimator_specs(args.estimators)
-    settings = draw_settings(load_robot(args.robot), args.settings, args.seed)
+    settings = draw_settings(robot, args.settings, args.seed)
     start = time.perf_counter()
     rows = run_evaluation(
         args.robot, specs, settings, budget_reference=args.budget_reference or None, duration_s=args.duration, jobs=args.jobs

@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 
 from spaceid_gym.effects import HiddenEffects
 from spaceid_gym.envs.free_floating import FreeFloatingIDEnv
-from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.limits import check_log_size
 from spaceid_gym.log import Dataset, load_dataset, write_dataset
 from spaceid_gym.robots import Robot
 from spaceid_gym.sim.sensors import SensorModel
@@ -43,8 +43,7 @@ def simulate_episode(
     a :class:`~spaceid_gym.effects.HiddenEffects` or a spec string (drawn from the seed), see the
     env; :func:`write_episode_dataset` then writes them to truth.json (``hidden_effects``).
     """
-    if not (np.isfinite(duration_s) and duration_s > 0.0):
-        raise SpaceIdInputError(f"duration: expected a positive number of seconds, got {duration_s!r}")
+    n_steps = check_log_size(duration_s, control_period_s, robot.n_joints)
     env = FreeFloatingIDEnv(
         robot,
         control_period_s=control_period_s,
@@ -53,7 +52,7 @@ def simulate_episode(
         hidden_effects=hidden_effects,
     )
     env.reset(seed=seed, options={"fuel_consumed_kg": fuel_consumed_kg})
-    for k in range(round(duration_s / control_period_s)):
+    for k in range(n_steps):
         env.step(excitation(k * control_period_s))
     return env
 
