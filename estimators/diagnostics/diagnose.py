@@ -63,6 +63,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 from scipy.stats import chi2
+from threadpoolctl import threadpool_limits
 
 from estimators.base import Estimator
 from estimators.diagnostics.residuals import ResidualAnalysis, analyse_residuals
@@ -148,8 +149,11 @@ class ModelFit(CandidateScores):
         effect: the candidate added (``None`` for the baseline).
         theta: the fitted unknowns (k,); ``names`` their names.
         rss: sum of squared gyro residuals, (rad/s)^2; ``n_residuals`` 3T; ``n_params`` k.
-        attitude_chi2: the attitude channel's chi-square at the fit (``None`` without attitude in the log), over
-            ``n_attitude_values`` values.
+        attitude_chi2: the attitude channel's ``-2 log L`` at the fit under the error model refitted there
+            (``attitude_noise``), less the log-determinant of the error model of the channel's weights
+            (:meth:`~estimators.models.attitude_channel.AttitudeChannel.profile_chi2`): a chi-square over
+            ``n_attitude_values`` values whose differences between fits are profile likelihood ratios (``None``
+            without attitude in the log).
         physical: the fitted quantities (base and effects), as in the estimate file.
         implausible: reasons why the fitted effect is not physical (empty if plausible).
         wall_time_s: time of the fit.
@@ -175,6 +179,7 @@ class ModelFit(CandidateScores):
     chi2: float = math.nan  # filled in by :func:`diagnose` once every model is fitted
     residual_consistent: bool | None = None  # filled in by :func:`diagnose` for the significant and plausible ones
     attitude_white_p: float = math.nan  # the whitened attitude residual's low-frequency test (:func:`low_frequency_p_value`)
+    attitude_noise: AttitudeNoise | None = None  # the attitude error model refitted at this fit
 
     @property
     def residual_rms_rad_s(self) -> float:
@@ -302,6 +307,7 @@ def fit_model(
     weights: ChannelWeights | None = None,
     channel: AttitudeChannel | None = None,
     problem: IdentificationProblem | None = None,
+    profile_noise: bool = False,
 ) -> tuple[ModelFit, Estimate | None]:
     """Fit ``model`` to ``log``: with ``estimator`` (returns its estimate), or by least squares from each of ``starts``.
 
@@ -310,7 +316,10 @@ def fit_model(
     ``|gyro residual|^2 / sigma_gyro^2 + |attitude residual|^2 / sigma_st^2`` (at most :data:`MAX_ITERATIONS`
     residual evaluations); otherwise the best on the gyro is kept. ``channel``: ``model``'s attitude channel on
     ``log`` if the caller has built it already (else built here when ``weights`` are given); ``problem``: ``model``'s
-    problem on ``log``, likewise.
+    problem on ``log``, likewise. ``profile_noise``: the attitude error model is a nuisance refitted at this model's
+    fit (and the fit refined under it), so that the fits' ``attitude_chi2`` differ by profile likelihood ratios
+    (:meth:`~estimators.models.attitude_channel.AttitudeChannel.profile_chi2`); else ``weights``' error model is
+    taken as known.
     """
     begin = time.perf_counter()
     problem = model.problem(log) if problem is None else problem
@@ -329,23 +338,34 @@ def fit_model(
         results = [polish.polish(problem, start).theta for start in starts]
         if channel is not None:
             assert weights is not None
-            # the gyro's minimum nearest each start, the best of them by both channels, refined on both
+            # the gyro's minimum nearest each start, the best of them by both channels, refined on both; then the
+            # attitude error model refitted at this model's fit and the fit refined under it (profile likelihood)
             scores = [_joint_chi2(problem, channel, weights, x) for x in results]
             theta = _joint_fit(problem, channel, weights, results[int(np.argmin(scores))])
+            if profile_noise:
+                own = ChannelWeights(weights.gyro_std_rad_s, channel.estimate_noise(theta, weights.attitude))
+                theta = _joint_fit(problem, channel, own, theta)
         else:
             scores = [float(r @ r) for r in (problem.residuals(x, count=False) for x in results)]
             theta = results[int(np.argmin(scores))]
-    attitude_chi2, attitude_information, attitude_white_p = None, None, math.nan
+    attitude_chi2, attitude_information, attitude_white_p, noise = None, None, math.nan, None
     if channel is not None:
         assert weights is not None
-        whitened = channel.residuals(theta, weights.attitude)
-        attitude_chi2 = float(whitened @ whitened)
-        attitude_information = channel.fisher(theta, weights.attitude)
+        if not profile_noise:
+            noise = weights.attitude
+        elif estimator is None:
+            noise = own.attitude
+        else:
+            noise = channel.estimate_noise(theta, weights.attitude)
+        whitened = channel.residuals(theta, noise)
+        attitude_chi2 = channel.profile_chi2(theta, noise, weights.attitude)
+        attitude_information = channel.fisher(theta, noise)
         attitude_white_p = low_frequency_p_value(whitened.reshape(-1, 3), ATTITUDE_BLOCK_S / float(np.mean(np.diff(log.t_s))))
     n_attitude = 0 if channel is None else channel.n_values
     fit = _scored(problem, theta, model, effect, (attitude_chi2, n_attitude), attitude_information, weights)
     fit.wall_time_s = time.perf_counter() - begin
     fit.attitude_white_p = attitude_white_p
+    fit.attitude_noise = noise
     return fit, estimate
 
 
@@ -454,6 +474,7 @@ def candidate_model(model: IdentificationModel, effect: str) -> IdentificationMo
     return IdentificationModel(model.robot, base, model.noise_std_rad_s, effects=[*model.effects, effect])
 
 
+@threadpool_limits.wrap(limits=1, user_api="blas")  # tall, thin Jacobians: BLAS threads only slow their SVDs down
 def diagnose(
     model: IdentificationModel,
     log: MeasurementLog,
@@ -508,7 +529,7 @@ def _diagnose(
     if channel is not None:
         # both channels from here on; the star tracker's noise from the data, the baseline refitted to both
         weights = ChannelWeights(sigma0, channel.estimate_noise(baseline.theta))
-        baseline = fit_model(model, log, starts=[baseline.theta], weights=weights, channel=channel)[0]
+        baseline = fit_model(model, log, starts=[baseline.theta], weights=weights, channel=channel, profile_noise=True)[0]
     fits = []
     for name in names:
         extended = candidate_model(model, name)
@@ -519,9 +540,10 @@ def _diagnose(
         restart = interior_start(params)[: len(baseline.theta)]
         k_base = params.base.n_params
         problem = extended.problem(log)
-        starts = best_of_grid(problem, [np.concatenate((baseline.theta, s)) for s in term.grid(baseline.theta[:k_base])])
+        grid = [np.concatenate((baseline.theta, s)) for s in term.grid(baseline.theta[:k_base])]
+        starts = best_of_grid(problem, grid, None if channel is None else AttitudeChannel.of(extended, log), weights)
         starts.append(np.concatenate((restart, term.starts(restart[:k_base])[0])))
-        fits.append(fit_model(extended, log, starts=starts, effect=name, weights=weights, problem=problem)[0])
+        fits.append(fit_model(extended, log, starts=starts, effect=name, weights=weights, problem=problem, profile_noise=True)[0])
     gyro_residual = model.problem(log).residuals(baseline.theta, count=False).reshape(-1, 3)
     sigma = _score(baseline, fits, alpha, difference_noise_std(gyro_residual))
     combined = _fit_challengers(model, log, baseline, fits, alpha, weights, sigma)
@@ -539,12 +561,21 @@ def _diagnose(
 GRID_STARTS = 3
 
 
-def best_of_grid(problem: IdentificationProblem, candidates: list[FloatArray]) -> list[FloatArray]:
-    """The :data:`GRID_STARTS` candidates (each (k,)) of lowest gyro cost, scored in one batched evaluation."""
+def best_of_grid(
+    problem: IdentificationProblem,
+    candidates: list[FloatArray],
+    channel: AttitudeChannel | None = None,
+    weights: ChannelWeights | None = None,
+) -> list[FloatArray]:
+    """The :data:`GRID_STARTS` candidates (each (k,)) of lowest cost, scored in one batched evaluation: the gyro's
+    chi-square, plus the attitude channel's with ``channel`` and ``weights`` (an effect may show in one channel only)."""
     if len(candidates) <= GRID_STARTS:
         return candidates
     points = np.clip(np.array(candidates), problem.parameters.lower, problem.parameters.upper)
-    order = np.argsort(problem.cost(points, count=False))
+    scores = problem.cost(points, count=False)
+    if channel is not None and weights is not None:
+        scores = scores * (3 * problem.n_samples) / weights.gyro_std_rad_s**2 + channel.chi2s(points, weights.attitude)
+    order = np.argsort(scores)
     return [points[i] for i in order[:GRID_STARTS]]
 
 
@@ -594,7 +625,7 @@ def _fit_challengers(
             np.concatenate((leader_base, leader_term, challenger_off)),
             np.concatenate((challenger_base, leader_off, challenger_term)),
         ]
-        fit = fit_model(both, log, starts=starts, effect=challenger.effect, weights=weights)[0]
+        fit = fit_model(both, log, starts=starts, effect=challenger.effect, weights=weights, profile_noise=True)[0]
         fit.chi2 = _chi2(fit, sigma * sigma)
         fit.lr_statistic = leader.chi2 - fit.chi2
         fit.p_value = nested_p_value(leader, fit)

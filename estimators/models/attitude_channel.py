@@ -44,6 +44,7 @@ by the whiteness of the whitened residual (``diagnose`` falls back to the gyro a
 from __future__ import annotations
 
 import math
+import weakref
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol
 
@@ -126,6 +127,11 @@ class AttitudeNoise:
             for white, walk, phi in zip(self.white_std_rad, self.walk_std_rad, self.walk_correlation, strict=True)
         ]
 
+    def log_det(self, n_steps: int) -> float:
+        """``log det`` of the covariance of the filtered differences of a log of ``n_steps`` samples (all three axes):
+        the term that, added to the chi-square, makes ``-2 log L`` comparable across error models."""
+        return float(sum(2.0 * np.sum(np.log(factor[0])) for factor in self.factors(n_steps)))
+
     def whiten(self, differences: FloatArray, factors: list[FloatArray] | None = None) -> FloatArray:
         """Differenced residuals (T-1, 3) or their Jacobian (T-1, 3, k) -> whitened (T-2, 3[, k]): ``u = d_k - phi
         d_{k-1}``, then ``L^-1 u`` per axis, unit variance and independent under the model."""
@@ -155,24 +161,28 @@ def _negative_log_likelihood(x: FloatArray, differences: FloatArray) -> float:
     return float(np.sum(np.log(factor[0])) + 0.5 * whitened @ whitened)
 
 
-def fit_attitude_noise(differences: FloatArray) -> AttitudeNoise:
+def fit_attitude_noise(differences: FloatArray, start: AttitudeNoise | None = None) -> AttitudeNoise:
     """Maximum-likelihood :class:`AttitudeNoise` of differenced attitude residuals (T-1, 3), rad, axis by axis.
 
     Starts from the moments of a white error plus a random walk (lag-1 autocovariance ``-sw^2``, variance
     ``2 sw^2 + snu^2``) with ``phi`` = 0.5, and from ``phi`` = 0.05 and 0.95, refining all three numbers with
-    Nelder-Mead (a smooth three-dimensional likelihood); the best of the three."""
+    Nelder-Mead (a smooth three-dimensional likelihood); the best of the three. ``start``: an error model fitted
+    to a nearby residual (another model's on the same log), tried as a fourth start."""
     white, walk, correlation = [], [], []
-    for d in np.asarray(differences, dtype=float).T:
+    for axis, d in enumerate(np.asarray(differences, dtype=float).T):
         variance = float(d @ d) / len(d)
         lag1 = float(d[1:] @ d[:-1]) / len(d)
         sw2 = min(max(-lag1, 0.01 * variance), 0.49 * variance)
         snu2 = max(variance - 2.0 * sw2, 0.01 * variance)
         logs = 0.5 * np.log(np.maximum([sw2, snu2], MIN_STD_RAD**2))
+        starts = [np.array([*logs, _logit(phi)]) for phi in (0.05, 0.5, 0.95)]
+        if start is not None:
+            near = (start.white_std_rad[axis], start.walk_std_rad[axis])
+            starts.append(np.array([*np.log(np.maximum(near, MIN_STD_RAD)), _logit(start.walk_correlation[axis])]))
         best = None
-        for phi in (0.05, 0.5, 0.95):
-            start = np.array([*logs, math.log(phi / (MAX_CORRELATION - phi))])
+        for x0 in starts:
             result = minimize(
-                _negative_log_likelihood, start, args=(d,), method="Nelder-Mead", options={"xatol": 1e-4, "fatol": 1e-6}
+                _negative_log_likelihood, x0, args=(d,), method="Nelder-Mead", options={"xatol": 1e-4, "fatol": 1e-6}
             )
             if best is None or result.fun < best.fun:
                 best = result
@@ -182,6 +192,12 @@ def fit_attitude_noise(differences: FloatArray) -> AttitudeNoise:
         walk.append(r if r > MIN_STD_RAD else 0.0)
         correlation.append(MAX_CORRELATION / (1.0 + math.exp(-best.x[2])))
     return AttitudeNoise(tuple(white), tuple(walk), tuple(correlation))  # type: ignore[arg-type]
+
+
+def _logit(phi: float) -> float:
+    """The Nelder-Mead coordinate of a step correlation ``phi`` in ``(0, MAX_CORRELATION)``."""
+    phi = min(max(phi, 1e-6), MAX_CORRELATION * (1.0 - 1e-9))
+    return math.log(phi / (MAX_CORRELATION - phi))
 
 
 def midpoint_log(log: MeasurementLog) -> MeasurementLog:
@@ -208,6 +224,18 @@ def midpoint_log(log: MeasurementLog) -> MeasurementLog:
         omega_base_body_rad_s=np.concatenate((omega[:1], 0.5 * (omega[:-1] + omega[1:]))),
         quat_base_to_inertial_wxyz=np.concatenate((np.asarray(quat[:1], dtype=float), mid_quat)),
     )
+
+
+#: the midpoint log of each log (:func:`midpoint_log`), made once and shared by every model's channel on it
+_MIDPOINT_LOGS: weakref.WeakKeyDictionary[MeasurementLog, MeasurementLog] = weakref.WeakKeyDictionary()
+
+
+def _shared_midpoint_log(log: MeasurementLog) -> MeasurementLog:
+    """:func:`midpoint_log` of ``log``, made once per log (logs are read-only)."""
+    midpoint = _MIDPOINT_LOGS.get(log)
+    if midpoint is None:
+        midpoint = _MIDPOINT_LOGS[log] = midpoint_log(log)
+    return midpoint
 
 
 class AttitudeChannel:
@@ -244,7 +272,7 @@ class AttitudeChannel:
         """The channel of ``model`` on ``log``; ``None`` when the log has no attitude or fewer than 3 samples."""
         if log.quat_base_to_inertial_wxyz is None or log.n_samples < 3:
             return None
-        return cls(model.problem(midpoint_log(log)), log)
+        return cls(model.problem(_shared_midpoint_log(log)), log)
 
     def predicted(self, theta: FloatArray) -> FloatArray:
         """``Phi_hat`` (P, T, 3), rad, for ``theta`` (P, k)."""
@@ -277,14 +305,31 @@ class AttitudeChannel:
         r = self.residuals(theta, noise)
         return float(r @ r)
 
+    def chi2s(self, thetas: FloatArray, noise: AttitudeNoise) -> FloatArray:
+        """:meth:`chi2` of each row of ``thetas`` (P, k), the model evaluated once for all: (P,)."""
+        omega = self.problem.base_rate(np.atleast_2d(thetas))[:, 1:]
+        differences = np.einsum("tij,ptj->pti", self._step_map, omega) - self._measured_steps
+        factors = self._factors(noise)
+        return np.array([float(np.sum(noise.whiten(d, factors) ** 2)) for d in differences])
+
     def fisher(self, theta: FloatArray, noise: AttitudeNoise) -> FloatArray:
         """Fisher information (k, k) of the attitude source about ``theta`` (k,) under ``noise``."""
         jac = self.jacobian(theta, noise)
         return jac.T @ jac
 
-    def estimate_noise(self, theta: FloatArray) -> AttitudeNoise:
-        """The error model fitted to the residual at ``theta`` (k,) by maximum likelihood (:func:`fit_attitude_noise`)."""
-        return fit_attitude_noise(self.differences(theta))
+    def estimate_noise(self, theta: FloatArray, start: AttitudeNoise | None = None) -> AttitudeNoise:
+        """The error model fitted to the residual at ``theta`` (k,) by maximum likelihood (:func:`fit_attitude_noise`;
+        ``start``: a nearby fit's error model, tried as one more start)."""
+        return fit_attitude_noise(self.differences(theta), start)
+
+    def profile_chi2(self, theta: FloatArray, noise: AttitudeNoise, reference: AttitudeNoise) -> float:
+        """``-2 log L`` of the residual at ``theta`` (k,) under ``noise``, less that of a white residual under
+        ``reference``'s covariance: ``chi2(theta, noise) + log det(noise) - log det(reference)``. With ``noise`` fitted
+        at ``theta`` (:meth:`estimate_noise`), differences of it between models are profile likelihood ratios: the
+        error model is a nuisance refitted under each model, so a model that explains structure the error model had
+        absorbed as the model's own wander gains its log-determinant, and one that explains nothing gains nothing."""
+        n_steps = len(self.measured)
+        return self.chi2(theta, noise) + noise.log_det(n_steps) - reference.log_det(n_steps)
 
     def _factors(self, noise: AttitudeNoise) -> list[FloatArray]:
         """The whitening factors of ``noise``, cached for the last noise model asked."""
