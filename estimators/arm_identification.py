@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 
 from estimators.base import Estimator
 from estimators.estimate import Estimate
-from estimators.linear_ls import weighted_lstsq
+from estimators.linear_ls import group_weighted
 from estimators.linear_problem import LinearIdentificationProblem
 from estimators.models.arm_model import ArmIdentificationModel, IdentificationRows
 from spaceid_gym.arm.log import ArmLog
@@ -158,8 +158,7 @@ def simulated_noise_std(data: str | Path, name: str) -> FloatArray | None:
 # ---------------------------------------------------------------------- fitting
 def joint_weighted(problem: LinearIdentificationProblem) -> LinearIdentificationProblem:
     """``problem`` with each row weighted by its joint's noise std from an OLS fit (module docstring)."""
-    theta, _ = weighted_lstsq(problem, None)
-    return problem.with_row_std(problem.group_noise_std(theta)[problem.row_group])
+    return group_weighted(problem)
 
 
 def fit(model: ArmIdentificationModel, train: Mapping[str, IdentificationRows], estimator: Estimator) -> Estimate:

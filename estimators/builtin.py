@@ -17,6 +17,7 @@ def builtin_estimators() -> dict[str, Callable[..., Estimator]]:
     from estimators.neural import NeuralNetworkEstimator
     from estimators.pso import ParticleSwarm
     from estimators.reference import CMAES, DifferentialEvolution, PyswarmsLocalBest
+    from estimators.sdp import SemidefiniteLeastSquares
 
     return {
         "pso": ParticleSwarm,
@@ -29,6 +30,7 @@ def builtin_estimators() -> dict[str, Callable[..., Estimator]]:
         "pyswarms-local": PyswarmsLocalBest,
         "ols": OrdinaryLeastSquares,
         "wls": WeightedLeastSquares,
+        "sdp": SemidefiniteLeastSquares,
         "abc": ArtificialBeeColony,
         "improved-abc": ImprovedABC,
     }

@@ -37,6 +37,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -93,15 +94,52 @@ def is_physically_consistent(params10: ArrayLike, rtol: float = 1e-12) -> bool:
     return bool(eig[0] >= -rtol * eig[-1])
 
 
-def log_cholesky_to_params10(z: ArrayLike) -> FloatArray:
-    """params10 (..., 10) of log-Cholesky coordinates ``z`` (..., 10) (module docstring): always consistent."""
-    z = np.asarray(z, dtype=float)
+def principal_moments_about_com(params10: ArrayLike) -> FloatArray:
+    """Principal moments of inertia about the CoM (..., 3), ascending, kg m^2, of params10 (..., 10) with ``m > 0``.
+
+    The classical route, independent of the pseudo-inertia: ``I_C = I - m S(c)^T S(c)`` (parallel axes, ``c = h / m``),
+    then its eigenvalues.
+    """
+    p = np.asarray(params10, dtype=float)
+    mass = p[..., 0]
+    if np.any(~(mass > 0.0)):
+        raise SpaceIdInputError("params10: principal moments about the CoM need a positive mass")
+    com = p[..., 1:4] / mass[..., None]
+    shift = np.sum(com * com, axis=-1)[..., None, None] * np.eye(3) - com[..., :, None] * com[..., None, :]
+    inertia_com = inertia_matrix_from_entries(p[..., 4:10]) - mass[..., None, None] * shift
+    return np.linalg.eigvalsh(inertia_com)
+
+
+def satisfies_triangle_inequalities(params10: ArrayLike, rtol: float = 1e-12) -> bool:
+    """The textbook test of one body's params10 (10,): ``m > 0``, principal moments about the CoM ``I_k >= 0`` and the
+    triangle inequalities ``I_i + I_j >= I_k`` (each to ``rtol`` times the largest moment).
+
+    Equivalent to :func:`is_physically_consistent` (the Schur complement of ``m`` in ``J`` is ``Sigma_C``, whose
+    eigenvalues are ``(I_i + I_j - I_k) / 2``) but computed without the pseudo-inertia: the two are checks of each other.
+    """
+    p = np.asarray(params10, dtype=float)
+    if p.shape != (10,):
+        raise SpaceIdInputError(f"params10: expected 10 numbers [m, mc (3), I (6)], got shape {p.shape}")
+    if not np.all(np.isfinite(p)) or p[0] <= 0.0:
+        return False
+    moments = principal_moments_about_com(p)
+    slack = rtol * max(float(np.abs(moments).max()), np.finfo(float).tiny)
+    return bool(moments[0] >= -slack and moments[0] + moments[1] >= moments[2] - slack)
+
+
+def _log_cholesky_factor(z: FloatArray) -> FloatArray:
+    """The upper-triangular factor ``U`` (..., 4, 4) of ``J = U U^T`` of log-Cholesky coordinates ``z`` (..., 10)."""
     upper = np.zeros((*z.shape[:-1], 4, 4))
     upper[..., 0, 0], upper[..., 1, 1], upper[..., 2, 2] = np.exp(z[..., 1]), np.exp(z[..., 2]), np.exp(z[..., 3])
     upper[..., 0, 1], upper[..., 1, 2], upper[..., 0, 2] = z[..., 4], z[..., 5], z[..., 6]
     upper[..., :3, 3] = z[..., 7:10]
     upper[..., 3, 3] = 1.0
-    upper *= np.exp(z[..., 0])[..., None, None]
+    return upper * np.exp(z[..., 0])[..., None, None]
+
+
+def log_cholesky_to_params10(z: ArrayLike) -> FloatArray:
+    """params10 (..., 10) of log-Cholesky coordinates ``z`` (..., 10) (module docstring): always consistent."""
+    upper = _log_cholesky_factor(np.asarray(z, dtype=float))
     return params10_from_pseudo_inertia(upper @ np.swapaxes(upper, -1, -2))
 
 
@@ -173,6 +211,8 @@ class PhysicalConsistency:
         free_columns: (G,) column indices of unconstrained coefficients (default none).
         free_bound: (G,) half-width of their search range, > 0.
         min_length_fraction: smallest CoM spread searched, as a fraction of ``size_m`` (default 1e-3).
+        nominal_full: (n_full,) prior values of the full parameters (e.g. the URDF's and zero friction), or ``None``
+            (then :meth:`prior_full` builds one from the box); the ``sdp`` estimator regularises toward it.
     """
 
     link_columns: IntArray
@@ -184,6 +224,7 @@ class PhysicalConsistency:
     free_columns: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.intp))
     free_bound: FloatArray = field(default_factory=lambda: np.zeros(0))
     min_length_fraction: float = 1e-3
+    nominal_full: FloatArray | None = None
 
     def __post_init__(self) -> None:
         links = _index_array("link_columns", self.link_columns, (10,))
@@ -220,7 +261,13 @@ class PhysicalConsistency:
             base_map = np.asarray(self.base_map, dtype=float)
             if base_map.ndim != 2 or base_map.shape[1] != n_full or not np.all(np.isfinite(base_map)):
                 raise SpaceIdInputError(f"base_map: expected a finite (k, {n_full}) matrix, got shape {np.shape(self.base_map)}")
+        nominal = None
+        if self.nominal_full is not None:
+            nominal = np.asarray(self.nominal_full, dtype=float)
+            if nominal.shape != (n_full,) or not np.all(np.isfinite(nominal)):
+                raise SpaceIdInputError(f"nominal_full: expected {n_full} finite values, got shape {np.shape(self.nominal_full)}")
         for attr, value in (
+            ("nominal_full", nominal),
             ("link_columns", links),
             ("friction_columns", friction),
             ("mass_range_kg", mass),
@@ -295,6 +342,57 @@ class PhysicalConsistency:
         lower[self.friction_columns], upper[self.friction_columns] = 0.0, self.friction_upper
         lower[self.free_columns], upper[self.free_columns] = -self.free_bound, self.free_bound
         return lower, upper
+
+    def link_scale(self) -> tuple[FloatArray, FloatArray]:
+        """Per link a typical mass (L,) kg, the geometric mean of its mass range, and its size (L,) m."""
+        return np.sqrt(self.mass_range_kg[:, 0] * self.mass_range_kg[:, 1]), self.size_m
+
+    def parameter_scale(self) -> FloatArray:
+        """A typical magnitude (n_full,) of each full parameter, in its unit: per link with typical mass ``m`` and size
+        ``s`` (:meth:`link_scale`) ``m`` (kg), ``m s`` (kg m) for the first moments, ``m s^2`` (kg m^2) for the inertia;
+        a friction column its search bound ``friction_upper``; a free column its ``free_bound``."""
+        mass, size = self.link_scale()
+        scale = np.empty(self.n_full)
+        scale[self.link_columns] = mass[:, None] * size[:, None] ** np.array([0, 1, 1, 1, 2, 2, 2, 2, 2, 2])
+        scale[self.friction_columns] = self.friction_upper
+        scale[self.free_columns] = self.free_bound
+        return scale
+
+    def prior_full(self) -> FloatArray:
+        """The full parameters (n_full,) a regulariser pulls toward: ``nominal_full`` when given, else per link a uniform
+        solid sphere of the link's typical mass and diameter ``size`` centred on its frame origin, zero friction and
+        free coefficients (physically consistent, but only a placeholder for missing prior knowledge)."""
+        if self.nominal_full is not None:
+            return self.nominal_full.copy()
+        mass, size = self.link_scale()
+        moment = 0.4 * mass * (size / 2.0) ** 2  # solid sphere, kg m^2
+        prior = np.zeros(self.n_full)
+        zero = np.zeros_like(mass)
+        prior[self.link_columns] = np.stack([mass, zero, zero, zero, moment, zero, moment, zero, zero, moment], axis=1)
+        return prior
+
+    def link_congruence(self) -> FloatArray:
+        """Per link the diagonal (L, 4) of ``T = sqrt(m) diag(s, s, s, 1)`` (``m``, ``s`` of :meth:`link_scale`): the
+        pseudo-inertia in scaled form is ``J_hat = T^-1 J T^-1``, of order one for a body of the link's size, and
+        ``J_hat >= 0`` exactly when ``J >= 0`` (a congruence)."""
+        mass, size = self.link_scale()
+        return np.sqrt(mass)[:, None] * np.stack([size, size, size, np.ones_like(size)], axis=1)
+
+    @cached_property
+    def _scaled_pseudo_inertia_map(self) -> FloatArray:
+        basis = np.eye(16).reshape(16, 4, 4)
+        symmetric = 0.5 * (basis + np.swapaxes(basis, -1, -2))
+        t = self.link_congruence()[:, None, :]  # (L, 1, 4)
+        scaled = t[..., :, None] * symmetric[None] * t[..., None, :]  # (L, 16, 4, 4): T E T
+        out = np.swapaxes(params10_from_pseudo_inertia(scaled), -1, -2).reshape(self.n_links, 10, 4, 4)
+        out.flags.writeable = False
+        return out
+
+    def scaled_pseudo_inertia_map(self) -> FloatArray:
+        """``M`` (L, 10, 4, 4), symmetric in its last two axes: a link's params10 is ``sum_ij M[l, :, i, j] J_hat[i, j]``
+        for a symmetric scaled pseudo-inertia ``J_hat`` (:meth:`link_congruence`); linear, from
+        :func:`params10_from_pseudo_inertia` (computed once, read-only)."""
+        return self._scaled_pseudo_inertia_map
 
     def full_from_search(self, search: ArrayLike) -> FloatArray:
         """Full parameters (..., n_full) of consistent search coordinates (..., n_full): every body consistent."""

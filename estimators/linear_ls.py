@@ -54,6 +54,13 @@ def weighted_lstsq(problem: LinearIdentificationProblem, row_std: FloatArray | N
     return theta, {"rank": int(rank), "condition_number": condition}
 
 
+def group_weighted(problem: LinearIdentificationProblem) -> LinearIdentificationProblem:
+    """``problem`` with each row weighted by its group's noise std from an OLS fit (Gautier's two-step weights, the
+    ones :class:`WeightedLeastSquares` uses): ``s_g^2 = RSS_g / (N_g - k N_g / N)``."""
+    theta, _ = weighted_lstsq(problem, None)
+    return problem.with_row_std(problem.group_noise_std(theta)[problem.row_group])
+
+
 class OrdinaryLeastSquares(Estimator):
     """Ordinary least squares (module docstring); no options besides the (unused) seed."""
 

@@ -285,7 +285,8 @@ class ArmIdentificationModel:
 
     def consistency(self) -> PhysicalConsistency:
         """The full parameters' layout for the physically consistent search: links (mass range and size as in
-        :meth:`full_box`), non-negative friction and armature, a free offset; ``base_map`` = ``K``."""
+        :meth:`full_box`), non-negative friction and armature, a free offset; ``base_map`` = ``K``; the URDF's values
+        (zero friction) as ``nominal_full``."""
         masses, size = self._link_bounds()
         columns, lower, upper = self._joint_term_bounds()
         free = lower < 0.0
@@ -298,4 +299,5 @@ class ArmIdentificationModel:
             base_map=self.base.K,
             free_columns=columns[free],
             free_bound=upper[free],
+            nominal_full=self.regressor.nominal_parameters(),
         )
