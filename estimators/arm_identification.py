@@ -247,7 +247,11 @@ def processed_noise_floor(preparation: Preparation, raw_std: FloatArray | None, 
 # ---------------------------------------------------------------------- leave one movement out
 @dataclass
 class CrossValidationRow:
-    """One held-out movement, one estimator, one model: the estimate's facts and its :class:`PredictionError`."""
+    """One held-out movement, one estimator, one model: the estimate's facts and its :class:`PredictionError`.
+
+    ``cost_excess_over_sdp``: a consistent colony's training cost over the ``sdp`` optimum of the same cost, relative
+    (``extra["cost_excess_over_sdp"]``), else ``None``.
+    """
 
     model: str
     estimator: str
@@ -255,6 +259,7 @@ class CrossValidationRow:
     consistent: bool | None
     wall_time_s: float
     n_evaluations: float
+    cost_excess_over_sdp: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready."""
@@ -264,6 +269,7 @@ class CrossValidationRow:
             "physically_consistent": self.consistent,
             "wall_time_s": self.wall_time_s,
             "n_evaluations": self.n_evaluations,
+            "cost_excess_over_sdp": self.cost_excess_over_sdp,
             **self.error.to_dict(),
         }
 
@@ -305,7 +311,13 @@ def leave_one_out(
                 error = prediction_error(model, estimate.theta, movements[held], (noise_floors or {}).get(held))
                 rows.append(
                     CrossValidationRow(
-                        model_label, label, error, physically_consistent(estimate), estimate.wall_time_s, estimate.n_evaluations
+                        model_label,
+                        label,
+                        error,
+                        physically_consistent(estimate),
+                        estimate.wall_time_s,
+                        estimate.n_evaluations,
+                        estimate.extra.get("cost_excess_over_sdp"),
                     )
                 )
     return rows
@@ -313,27 +325,41 @@ def leave_one_out(
 
 def cross_validation_markdown(rows: Sequence[CrossValidationRow], joint_names: Sequence[str]) -> str:
     """The leave-one-movement-out table: one line per model, estimator and held-out movement, per-joint relative error
-    (%) and the overall figure, then per model and estimator the mean over the movements."""
+    (%), the overall figure, consistency, the training cost over the ``sdp`` optimum (%, consistent colonies) and the
+    time of the fit (s), then per model and estimator the mean over the movements (the largest cost excess)."""
     header = (
-        f"| model | estimator | held-out movement | {' | '.join(joint_names)} | overall % | consistent |\n"
-        f"|---|---|---|{'---:|' * len(joint_names)}---:|---|\n"
+        f"| model | estimator | held-out movement | {' | '.join(joint_names)} | overall % | consistent | "
+        "cost over sdp % | fit s |\n"
+        f"|---|---|---|{'---:|' * len(joint_names)}---:|---|---:|---:|\n"
     )
     lines = []
     for (model, estimator), members in _grouped(rows).items():
         for row in members:
             cells = " | ".join(f"{v:.1f}" for v in row.error.relative_percent)
             lines.append(
-                f"| {model} | {estimator} | {row.error.movement} | {cells} | {row.error.overall_percent:.1f} | {_yes_no(row.consistent)} |"
+                f"| {model} | {estimator} | {row.error.movement} | {cells} | {row.error.overall_percent:.1f} | "
+                f"{_yes_no(row.consistent)} | {_percent(row.cost_excess_over_sdp)} | {row.wall_time_s:.2f} |"
             )
         mean = np.mean([r.error.relative_percent for r in members], axis=0)
         overall = float(np.mean([r.error.overall_percent for r in members]))
         consistent = [r.consistent for r in members]
         summary = _yes_no(None if None in consistent else all(c for c in consistent if c is not None))
+        time_s = float(np.mean([r.wall_time_s for r in members]))
         lines.append(
             f"| **{model}** | **{estimator}** | **mean of {len(members)}** | {' | '.join(f'**{v:.1f}**' for v in mean)} | "
-            f"**{overall:.1f}** | {summary} |"
+            f"**{overall:.1f}** | {summary} | {_percent(_largest_excess(members))} (max) | {time_s:.2f} |"
         )
     return header + "\n".join(lines) + "\n"
+
+
+def _largest_excess(rows: Sequence[CrossValidationRow]) -> float | None:
+    """The largest ``cost_excess_over_sdp`` of the rows, or ``None`` if any lacks one."""
+    excess = [r.cost_excess_over_sdp for r in rows]
+    return None if not excess or any(e is None for e in excess) else max(e for e in excess if e is not None)
+
+
+def _percent(value: float | None) -> str:
+    return "" if value is None else f"{100.0 * value:+.4f}"
 
 
 def _grouped(rows: Sequence[CrossValidationRow]) -> dict[tuple[str, str], list[CrossValidationRow]]:
@@ -359,6 +385,7 @@ def summary_table(rows: Sequence[CrossValidationRow]) -> list[dict[str, Any]]:
             "all_consistent": None if any(r.consistent is None for r in members) else all(bool(r.consistent) for r in members),
             "n_movements": len(members),
             "mean_wall_time_s": float(np.mean([r.wall_time_s for r in members])),
+            "max_cost_excess_over_sdp": _largest_excess(members),
         }
         for (model, estimator), members in _grouped(rows).items()
     ]

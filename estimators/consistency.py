@@ -394,6 +394,75 @@ class PhysicalConsistency:
         :func:`params10_from_pseudo_inertia` (computed once, read-only)."""
         return self._scaled_pseudo_inertia_map
 
+    # ------------------------------------------------------------------ factor coordinates (local descent)
+    @property
+    def factor_dimension(self) -> int:
+        """Length of the factor coordinates: 16 per link, one per friction and free column."""
+        return 16 * self.n_links + len(self.friction_columns) + len(self.free_columns)
+
+    def _factor_parts(self, factor: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Split factor coordinates (D,) into the links' ``Y_hat`` (L, 4, 4), friction roots (F,) and free values (G,)."""
+        y = np.asarray(factor, dtype=float)
+        if y.shape != (self.factor_dimension,):
+            raise SpaceIdInputError(f"factor: expected {self.factor_dimension} factor coordinates, got shape {y.shape}")
+        n_links, n_friction = self.n_links, len(self.friction_columns)
+        start = 16 * n_links
+        return y[:start].reshape(n_links, 4, 4), y[start : start + n_friction], y[start + n_friction :]
+
+    def factor_from_search(self, search: ArrayLike, root_floor: float = 0.0) -> FloatArray:
+        """Factor coordinates (D,) of one point (n_full,) of the consistent search coordinates; friction roots ``w`` below
+        ``root_floor`` are raised to it (``w = 0`` is a stationary point of ``scale w^2`` that a descent cannot leave).
+
+        Factor coordinates (a Burer-Monteiro factorisation): per link a full 4x4 ``Y_hat`` with ``J_hat = Y_hat Y_hat^T``
+        (here the log-Cholesky factor, scaled), per friction column ``w`` with coefficient ``scale w^2``, per free column
+        the value over its scale (:meth:`parameter_scale`). Every real vector is a consistent set of bodies, the
+        boundary (a thin body, zero friction) is at finite coordinates, and the maps are polynomials: for a convex cost
+        every local minimum in these coordinates is a global minimum over the consistent parameters (Journée, Bach,
+        Absil and Sepulchre 2010: a local minimum of ``f(Y Y^T)`` with square ``Y`` is global when ``f`` is convex).
+        """
+        s = np.asarray(search, dtype=float)
+        scale = self.parameter_scale()
+        factor = _log_cholesky_factor(s[self.link_columns]) / self.link_congruence()[:, :, None]  # T^-1 U
+        friction = np.maximum(np.sqrt(np.clip(s[self.friction_columns], 0.0, None) / scale[self.friction_columns]), root_floor)
+        return np.concatenate((factor.reshape(-1), friction, s[self.free_columns] / scale[self.free_columns]))
+
+    def full_from_factor(self, factor: ArrayLike) -> FloatArray:
+        """Full parameters (n_full,) of factor coordinates (D,) (:meth:`factor_from_search`): always consistent."""
+        y_hat, roots, free = self._factor_parts(np.asarray(factor, dtype=float))
+        scale = self.parameter_scale()
+        full = np.empty(self.n_full)
+        full[self.link_columns] = np.einsum("lcij,lij->lc", self.scaled_pseudo_inertia_map(), y_hat @ np.swapaxes(y_hat, -1, -2))
+        full[self.friction_columns] = scale[self.friction_columns] * roots**2
+        full[self.free_columns] = scale[self.free_columns] * free
+        return full
+
+    def factor_jacobian(self, factor: ArrayLike) -> FloatArray:
+        """``d full / d factor`` (n_full, D) at factor coordinates (D,): ``d params10_c / d Y_hat_ab = 2 sum_j M[c, a, j]
+        Y_hat[j, b]`` per link, ``2 scale w`` per friction column, ``scale`` per free column."""
+        y_hat, roots, _ = self._factor_parts(np.asarray(factor, dtype=float))
+        scale = self.parameter_scale()
+        out = np.zeros((self.n_full, self.factor_dimension))
+        blocks = 2.0 * self.scaled_pseudo_inertia_map() @ y_hat[:, None, :, :]  # (L, 10, 4, 4)
+        for link, columns in enumerate(self.link_columns):
+            out[columns, 16 * link : 16 * link + 16] = blocks[link].reshape(10, 16)
+        start = 16 * self.n_links
+        n_friction, n_free = len(self.friction_columns), len(self.free_columns)
+        out[self.friction_columns, start + np.arange(n_friction)] = 2.0 * scale[self.friction_columns] * roots
+        out[self.free_columns, start + n_friction + np.arange(n_free)] = scale[self.free_columns]
+        return out
+
+    def factor_curvature(self, weights: ArrayLike) -> FloatArray:
+        """The Hessian (D, D) of ``weights . full(factor)`` for weights (n_full,): constant, the maps being quadratic;
+        per link ``2 G kron E`` with ``G = sum_c weights_c M[c]``, per friction column ``2 scale weights_c``."""
+        w = np.asarray(weights, dtype=float)
+        out = np.zeros((self.factor_dimension, self.factor_dimension))
+        gram = np.einsum("lc,lcij->lij", w[self.link_columns], self.scaled_pseudo_inertia_map())
+        for link in range(self.n_links):
+            out[16 * link : 16 * link + 16, 16 * link : 16 * link + 16] = 2.0 * np.kron(gram[link], np.eye(4))
+        friction = 16 * self.n_links + np.arange(len(self.friction_columns))
+        out[friction, friction] = 2.0 * self.parameter_scale()[self.friction_columns] * w[self.friction_columns]
+        return out
+
     def full_from_search(self, search: ArrayLike) -> FloatArray:
         """Full parameters (..., n_full) of consistent search coordinates (..., n_full): every body consistent."""
         s = np.asarray(search, dtype=float)

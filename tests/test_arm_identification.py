@@ -4,6 +4,7 @@ Cramér-Rao bound, friction diagnosis, where it fails, the real logs, and the ``
 from __future__ import annotations
 
 import dataclasses
+import json
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +13,7 @@ import pytest
 from estimators.arm_identification import (
     Preparation,
     fit,
+    joint_weighted,
     leave_one_out,
     load_movements,
     physically_consistent,
@@ -19,6 +21,7 @@ from estimators.arm_identification import (
     processed_noise_floor,
     summary_table,
 )
+from estimators.consistency import params10_from_pseudo_inertia, pseudo_inertia
 from estimators.diagnostics.arm_diagnose import diagnose_arm, where_it_fails
 from estimators.evaluation import estimator_from_spec
 from estimators.linear_problem import LinearIdentificationProblem
@@ -85,9 +88,18 @@ def test_noise_gain_is_the_std_of_filtered_white_noise() -> None:
     assert kappa == pytest.approx(preparation.correlation_factor(dt), rel=0.15)
 
 
-def test_wls_and_consistent_improved_abc_reach_the_noise_floor_and_the_bound(model, simulated) -> None:
+def _training(model: ArmIdentificationModel, simulated: dict) -> tuple[dict, LinearIdentificationProblem]:
+    """The training movement's rows and the cost every consistent estimator minimises (joint-weighted, as ``fit`` poses it)."""
+    train = {"train": Preparation().rows(model, simulated["train"].simulation.log)}
+    return train, joint_weighted(model.problem(train))
+
+
+def test_wls_and_sdp_reach_the_noise_floor_and_the_bound(model, simulated) -> None:
+    """Deterministic: WLS and the convex consistent optimum (sdp) on a 20 s noisy training log, against the truth, the
+    held-out noise floor and the Cramér-Rao bound; sdp's cost is the least over consistent parameters (the truth is
+    one candidate, WLS's base parameters made consistent link by link another) and at least WLS's."""
     preparation = Preparation()
-    train_rows = preparation.rows(model, simulated["train"].simulation.log)
+    train, problem = _training(model, simulated)
     held_rows = preparation.rows(model, simulated["held"].simulation.log)
     noise = np.asarray(simulated["train"].truth["noise"]["torque_std_Nm"])
     floor = processed_noise_floor(preparation, noise, simulated["held"].simulation.log)
@@ -97,17 +109,52 @@ def test_wls_and_consistent_improved_abc_reach_the_noise_floor_and_the_bound(mod
     bound = LinearIdentificationProblem(
         raw, raw @ beta_true, model.base.names, beta_true - 1, beta_true + 1, row_std=np.tile(noise, clean.n_samples)
     ).crlb_std(beta_true)
-    wls = fit(model, {"train": train_rows}, estimator_from_spec("wls"))
-    error = prediction_error(model, wls.theta, held_rows, floor)
+    wls = fit(model, train, estimator_from_spec("wls"))
+    sdp = fit(model, train, estimator_from_spec("sdp"))
     # a 20 s random excitation (the README's figures: 30 s optimised, benchmarks/ur5_simulated.py): looser bounds
-    assert error.overall_noise_ratio < 1.3
+    assert prediction_error(model, wls.theta, held_rows, floor).overall_noise_ratio < 1.3
     assert np.sqrt(np.mean(((wls.theta - beta_true) / bound) ** 2)) < 2.5
-    colony = fit(
-        model, {"train": train_rows}, estimator_from_spec("improved-abc[consistent=true,polish=true,max_evaluations=20000]")
-    )
-    assert physically_consistent(colony) is True
-    assert colony.cost_history[-1] <= colony.extra["colony_cost"]
-    assert prediction_error(model, colony.theta, held_rows, floor).overall_noise_ratio < 1.35
+    assert physically_consistent(sdp) is True and sdp.extra["solver"] == "CLARABEL"
+    assert prediction_error(model, sdp.theta, held_rows, floor).overall_noise_ratio < 1.1  # 1.045 measured, WLS 1.21
+    assert np.sqrt(np.mean(((sdp.theta - beta_true) / bound) ** 2)) < 2.5
+    cost = problem.cost(np.vstack([wls.theta, sdp.theta, beta_true]), count=False)
+    assert cost[0] < cost[1] < cost[2]  # WLS (unconstrained) < sdp < the truth (consistent, fitted to no noise)
+    assert cost[1] == pytest.approx(sdp.cost, rel=1e-12)
+    # WLS's base parameters made consistent: the full set nearest the URDF's, each pseudo-inertia clipped to PSD
+    full = model.base.full_parameters(wls.theta, model.regressor.nominal_parameters())
+    for columns in model.consistency().link_columns:
+        eigenvalues, vectors = np.linalg.eigh(pseudo_inertia(full[columns]))
+        full[columns] = params10_from_pseudo_inertia((vectors * np.clip(eigenvalues, 1e-9, None)) @ vectors.T)
+    full[model.consistency().friction_columns] = np.clip(full[model.consistency().friction_columns], 0.0, None)
+    assert cost[1] < problem.cost(model.base.to_base(full), count=False)[0]
+
+
+#: colony seeds of the statistical test and how many must end within 1 % of the sdp cost. Measured (issue 21's seed
+#: study, benchmarks/ur5_colony_vs_sdp.py --datasets 3 --seeds 20): 60 of 60 fits within 1 % at 20 000 evaluations
+#: (largest excess 0.011 %; this test's data are its dataset 3), so the failure rate is at most 4.9 % (one-sided 95 %
+#: Clopper-Pearson bound for 0 of 60); at that rate fewer than 6 of 8 seeds succeed with probability 0.0054: requiring
+#: 6 of 8 fails a correct colony less than once in 180 runs, whichever seeds are drawn.
+COLONY_SEEDS, COLONY_WITHIN = 8, 6
+
+
+def test_consistent_colony_reaches_the_sdp_cost(model, simulated) -> None:
+    """The polished consistent improved ABC at 20 000 evaluations ends within 1 % of the convex optimum's cost on at
+    least ``COLONY_WITHIN`` of ``COLONY_SEEDS`` seeds (the binomial bound above), reports that excess itself, and is
+    consistent and never meaningfully below the optimum on every seed."""
+    train, problem = _training(model, simulated)
+    sdp_cost = float(problem.cost(fit(model, train, estimator_from_spec("sdp")).theta, count=False)[0])
+    within = 0
+    for seed in range(COLONY_SEEDS):
+        colony = fit(
+            model, train, estimator_from_spec("improved-abc[consistent=true,polish=true,max_evaluations=20000]", seed=seed)
+        )
+        excess = (colony.cost - sdp_cost) / sdp_cost
+        assert physically_consistent(colony) is True
+        assert colony.cost_history[-1] <= colony.extra["colony_cost"]
+        assert colony.extra["cost_excess_over_sdp"] == pytest.approx(excess, abs=1e-9)
+        assert excess > -1e-4  # the sdp's regulariser trades at most ~1e-5 here
+        within += excess <= 0.01
+    assert within >= COLONY_WITHIN
 
 
 def test_diagnose_names_missing_friction_and_adding_it_reaches_the_noise_floor(ur5, model, simulated) -> None:
@@ -220,3 +267,37 @@ def test_arm_diagnose_and_cross_validate_commands(simulated, tmp_path: Path, cap
     )
     assert code == 0 and (tmp_path / "c" / "table.md").read_text().count("| with coulomb,viscous | ols |") == 2
     assert main(["arm", "diagnose", "--data", str(root), "--decimate", "0", "--out", str(tmp_path / "e")]) == 2
+
+
+def test_sdp_in_the_arm_commands(simulated, tmp_path: Path, capsys) -> None:
+    """``spaceid arm identify --estimator sdp`` and ``arm cross-validate`` with sdp and the consistent colony: the
+    estimate file names the solver, the table and the printout give each colony fit's cost over the sdp optimum and
+    the time per fit."""
+    root = str(simulated["root"])
+    args = ["arm", "identify", "--data", root, "--train", "train", "--validate", "held", "--estimator", "sdp"]
+    assert main([*args, "--out", str(tmp_path / "i")]) == 0
+    written = json.loads((tmp_path / "i" / "estimate.json").read_text())
+    assert written["estimator"] == "sdp" and written["solver"] == "CLARABEL" and written["fallback_reason"] is None
+    assert "held" in capsys.readouterr().out
+    colony = "improved-abc[consistent=true,polish=true,max_evaluations=5000]"
+    code = main(
+        [
+            "arm",
+            "cross-validate",
+            "--data",
+            root,
+            "--movements",
+            "train,held",
+            "--estimators",
+            f"sdp,{colony}",
+            "--out",
+            str(tmp_path / "c"),
+        ]
+    )
+    text = capsys.readouterr().out
+    assert code == 0 and "cost over sdp:" in text and "s/fit" in text
+    rows = json.loads((tmp_path / "c" / "rows.json").read_text())["rows"]
+    excess = [r["cost_excess_over_sdp"] for r in rows if r["estimator"] == colony]
+    assert len(excess) == 2 and all(abs(e) < 0.01 for e in excess)
+    assert all(r["physically_consistent"] for r in rows)
+    assert "cost over sdp %" in (tmp_path / "c" / "table.md").read_text()

@@ -126,8 +126,8 @@ def add_arm_cross_validate_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--movements", default=None, help="comma-separated movements (default all)")
     parser.add_argument(
         "--estimators",
-        default="ols,wls,improved-abc[consistent=true,polish=true,max_evaluations=100000]",
-        help="comma-separated estimator specs (default ols, wls and the consistent improved ABC)",
+        default="ols,wls,sdp,improved-abc[consistent=true,polish=true,max_evaluations=100000]",
+        help="comma-separated estimator specs (default ols, wls, the convex consistent optimum sdp, the consistent improved ABC)",
     )
     parser.add_argument(
         "--compare-without-friction", action="store_true", help="also fit the model without friction (the error friction removes)"
@@ -233,6 +233,9 @@ def run_arm_identify(args: argparse.Namespace) -> None:
         f"({estimate.n_evaluations:.0f} evaluations)"
         + ("" if consistent is None else f"; physically consistent links: {sum(consistent)}/{len(consistent)}")
     )
+    excess = estimate.extra.get("cost_excess_over_sdp")
+    if excess is not None:
+        print(f"training cost {100.0 * excess:+.4f} % over the sdp optimum of the same cost")
     if errors:
         print("held-out relative error per joint (%) | overall")
         for error in errors:
@@ -273,9 +276,11 @@ def run_arm_cross_validate(args: argparse.Namespace) -> None:
     print(f"leave one movement out over {len(logs)} movements in {time.perf_counter() - start:.0f} s; mean held-out error (%):")
     for entry in summary:
         cells = " ".join(f"{v:6.1f}" for v in entry["mean_relative_percent"])
+        excess = entry["max_cost_excess_over_sdp"]
         print(
             f"  {entry['model']:<28} {entry['estimator']:<60} {cells} | {entry['mean_overall_percent']:6.1f} %"
-            f" | consistent: {entry['all_consistent']}"
+            f" | consistent: {entry['all_consistent']} | {entry['mean_wall_time_s']:.2f} s/fit"
+            + ("" if excess is None else f" | cost over sdp: {100.0 * excess:+.4f} % (largest)")
         )
     print(f"wrote {args.out}/table.md, rows.json")
 
