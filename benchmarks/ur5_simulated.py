@@ -30,7 +30,7 @@ from estimators.arm_identification import Preparation, fit, physically_consisten
 from estimators.evaluation import estimator_from_spec
 from estimators.linear_problem import LinearIdentificationProblem
 from estimators.models.arm_model import ArmIdentificationModel
-from spaceid_gym.arm.datasets import simulate_arm_dataset
+from spaceid_gym.arm.datasets import simulate_train_and_held_out
 from spaceid_gym.arm.robot import load_arm
 
 FRICTION = ("coulomb", "viscous")
@@ -41,9 +41,10 @@ def run_seed(seed: int, duration_s: float, budget: int, preparation: Preparation
     robot = load_arm("ur5")
     model = ArmIdentificationModel.build(robot, FRICTION)
     with tempfile.TemporaryDirectory() as folder:
-        train = simulate_arm_dataset(robot, duration_s, FRICTION, seed, "optimised", f"{folder}/train")
-        p_true = np.array(list(train.truth["parameters"].values()))
-        held = simulate_arm_dataset(robot, 20.0, FRICTION, seed + 10_000, "fourier", f"{folder}/held", parameters=p_true)
+        train, held = simulate_train_and_held_out(
+            robot, FRICTION, (duration_s, seed, "optimised"), (20.0, seed + 10_000, "fourier"), folder
+        )
+    p_true = np.array(list(train.truth["parameters"].values()))
     noise = np.asarray(train.truth["noise"]["torque_std_Nm"])
     clean = train.simulation.clean
     raw_rows = model.log_regressor(clean).reshape(-1, model.n_params)
@@ -62,6 +63,7 @@ def run_seed(seed: int, duration_s: float, budget: int, preparation: Preparation
     floor = processed_noise_floor(preparation, noise, held.simulation.log)
     specs = {
         "wls": "wls",
+        "sdp": "sdp",
         "improved-abc (consistent)": f"improved-abc[consistent=true,max_evaluations={budget}]",
         "abc (consistent)": f"abc[consistent=true,max_evaluations={budget}]",
         "improved-abc (consistent, polished)": f"improved-abc[consistent=true,polish=true,max_evaluations={budget}]",

@@ -125,3 +125,20 @@ def simulate_arm_dataset(
     )
     folder = write_dataset(out_dir, simulation.log, arm.urdf_text, truth)  # type: ignore[arg-type]  # any log with to_csv
     return ArmDataset(folder, simulation, truth)
+
+
+def simulate_train_and_held_out(
+    robot: str | ArmRobot,
+    friction: FrictionModel | Sequence[str] | None,
+    train: tuple[float, int, str],
+    held: tuple[float, int, str],
+    out_dir: str | Path,
+) -> tuple[ArmDataset, ArmDataset]:
+    """Two datasets of the same true robot: ``train`` = (duration s, seed, trajectory) draws the robot and is written to
+    ``out_dir/train``; ``held`` = (duration s, seed, trajectory) reuses its parameters, with its own excitation and
+    noise, in ``out_dir/held`` (:func:`simulate_arm_dataset` for both)."""
+    folder = Path(out_dir)
+    first = simulate_arm_dataset(robot, train[0], friction, train[1], train[2], folder / "train")
+    parameters = np.array(list(first.truth["parameters"].values()))
+    second = simulate_arm_dataset(robot, held[0], friction, held[1], held[2], folder / "held", parameters=parameters)
+    return first, second
