@@ -20,6 +20,7 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares
+from threadpoolctl import threadpool_limits
 
 from estimators.base import Estimator, SearchResult
 from estimators.options import finite_vector, positive_option
@@ -158,22 +159,24 @@ class LeastSquaresPolish(Estimator):
         if bounded:
             x0 = np.clip(x0, params.lower, params.upper)
         trace = _Trace(problem, self.max_iterations)
-        try:
-            result = least_squares(
-                trace.residuals,
-                x0,
-                jac=trace.jacobian,
-                bounds=(params.lower, params.upper) if bounded else (-np.inf, np.inf),
-                method=self.method,
-                x_scale=params.scale,
-                ftol=self.ftol,
-                xtol=self.xtol,
-                gtol=self.gtol,
-            )
-            x, status, message = np.asarray(result.x, dtype=float), int(result.status), str(result.message)
-        except _IterationLimit:
-            assert trace.x is not None
-            x, status, message = trace.x, -3, f"stopped after max_iterations={self.max_iterations} accepted steps"
+        # a tall, thin Jacobian (3T x k): BLAS threads only slow its SVD down, several times on a busy machine
+        with threadpool_limits(limits=1, user_api="blas"):
+            try:
+                result = least_squares(
+                    trace.residuals,
+                    x0,
+                    jac=trace.jacobian,
+                    bounds=(params.lower, params.upper) if bounded else (-np.inf, np.inf),
+                    method=self.method,
+                    x_scale=params.scale,
+                    ftol=self.ftol,
+                    xtol=self.xtol,
+                    gtol=self.gtol,
+                )
+                x, status, message = np.asarray(result.x, dtype=float), int(result.status), str(result.message)
+            except _IterationLimit:
+                assert trace.x is not None
+                x, status, message = trace.x, -3, f"stopped after max_iterations={self.max_iterations} accepted steps"
         trace.finish(x)
         extra: dict[str, Any] = {
             "method": self.method,
