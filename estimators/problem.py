@@ -19,6 +19,7 @@ of a number.
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Callable
 from typing import Any
 
@@ -145,6 +146,20 @@ def _slosh_locators(
     return tank, liquid
 
 
+#: the effect context of each log (:func:`_effect_context`), dropped with the log
+_CONTEXTS: weakref.WeakKeyDictionary[MeasurementLog, EffectContext] = weakref.WeakKeyDictionary()
+
+
+def _effect_context(log: MeasurementLog) -> EffectContext:
+    """:meth:`~estimators.models.effects.EffectContext.from_log`, computed once per log and
+    shared by every problem on it (its arrays read-only, as the log's)."""
+    context = _CONTEXTS.get(log)
+    if context is None:
+        context = _CONTEXTS[log] = EffectContext.from_log(log)
+        context.t_s.flags.writeable = context.rot_rel.flags.writeable = False
+    return context
+
+
 class IdentificationProblem:
     """The objective of an :class:`IdentificationModel` on one log; see the module docstring.
 
@@ -158,12 +173,10 @@ class IdentificationProblem:
         self.model = model
         self.parameters = model.parameters
         self.log = log
-        self.momentum = MomentumModel(model.robot, log)
+        self.momentum = MomentumModel.of(model.robot, log)
         params = model.parameters
         self._effects = (
-            EffectPrediction(self.momentum, params.terms, EffectContext.from_log(log))
-            if isinstance(params, WithEffects)
-            else None
+            EffectPrediction(self.momentum, params.terms, _effect_context(log)) if isinstance(params, WithEffects) else None
         )
         self.measured = np.ascontiguousarray(log.omega_base_body_rad_s, dtype=float)
         self.n_samples = log.n_samples

@@ -22,6 +22,8 @@ This model never touches the simulator's integration path: it needs only the log
 
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 import pinocchio as pin
 from numba import njit
@@ -34,6 +36,9 @@ from spaceid_gym.robots import Robot
 
 FloatArray = NDArray[np.float64]
 Samples = slice | NDArray[np.intp]
+
+#: the models of each log (:meth:`MomentumModel.of`), dropped with the log
+_SHARED: weakref.WeakKeyDictionary[MeasurementLog, list[MomentumModel]] = weakref.WeakKeyDictionary()
 
 
 class MomentumModel:
@@ -71,8 +76,21 @@ class MomentumModel:
         # (T, 6) kg m^2 about the base origin: xx, xy, yy, xz, yz, zz (pinocchio's order)
         self._inertia6 = np.ascontiguousarray(inertia_origin[:, [0, 0, 1, 0, 1, 2], [0, 1, 1, 2, 2, 2]])
         self._momentum = arm_momentum  # (T, 6), [P; L] of the arm's motion, base frame
-        self._model, self._data, self._log = model, data, log
+        self._model, self._data = model, data
+        self._q, self._dq = log.q_rad, log.dq_rad_s  # not the log itself: the models shared per log (:meth:`of`) must not keep it
         self._payload_terms: tuple[FloatArray, FloatArray] | None = None
+
+    @classmethod
+    def of(cls, robot: Robot, log: MeasurementLog) -> MomentumModel:
+        """The model of ``robot`` on ``log``, built once per robot and log and then shared: its arm terms depend on
+        nothing else, so every identification model fitted to the log (each candidate of a diagnosis) uses the same
+        (the log's arrays are read-only; the robot must not be changed once used)."""
+        shared = _SHARED.setdefault(log, [])
+        for model in shared:
+            if model.robot is robot:
+                return model
+        shared.append(cls(robot, log))
+        return shared[-1]
 
     # ------------------------------------------------------------------ predictions
     def predict(self, base10: FloatArray, payload10: FloatArray | None = None, samples: Samples = slice(None)) -> FloatArray:
@@ -209,11 +227,11 @@ class MomentumModel:
 
     def _last_link_motion(self) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Last link's rotation (T, 3, 3), position (T, 3) in the base frame and twist relative to the base, own frame (T, 6)."""
-        model, data, log = self._model, self._data, self._log
+        model, data = self._model, self._data
         last = model.njoints - 1
         q_full, v_full = pin.neutral(model), np.zeros(model.nv)
         rot, pos, twist = np.empty((self.n_samples, 3, 3)), np.empty((self.n_samples, 3)), np.empty((self.n_samples, 6))
-        for i, (q, dq) in enumerate(zip(log.q_rad, log.dq_rad_s, strict=True)):
+        for i, (q, dq) in enumerate(zip(self._q, self._dq, strict=True)):
             q_full[7:], v_full[6:] = q, dq
             pin.forwardKinematics(model, data, q_full, v_full)  # base at rest at the origin: joint motion only
             rot[i], pos[i], twist[i] = data.oMi[last].rotation, data.oMi[last].translation, data.v[last].vector
