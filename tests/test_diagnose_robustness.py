@@ -16,15 +16,16 @@ import pytest
 from scipy.stats import chi2
 
 from agents.excitation import FourierExcitation
-from estimators.diagnostics.diagnose import NO_MISSING_EFFECT, diagnose, low_frequency_p_value
+from estimators.diagnostics.diagnose import NO_MISSING_EFFECT, attitude_gyro_dependence, diagnose, low_frequency_p_value
 from estimators.diagnostics.suite import DIAGNOSTIC_EXCITATION
-from estimators.models.attitude_channel import AttitudeNoise, fit_attitude_noise
+from estimators.diagnostics.workflow import true_parameters
+from estimators.models.attitude_channel import AttitudeChannel, AttitudeNoise, fit_attitude_noise
 from estimators.problem import IdentificationModel
 from spaceid_gym.datasets import simulate_episode
 from spaceid_gym.log import MeasurementLog
 from spaceid_gym.robots import Robot, load_robot
 from spaceid_gym.sim.sensors import SensorModel
-from spaceid_gym.variations import draw_variation, simulate_variation
+from spaceid_gym.variations import draw_variation, simulate_variation, truth_of
 
 FUEL_CONSUMED_KG = 30.0
 
@@ -62,6 +63,36 @@ def test_a_fused_attitude_is_no_missing_effect(paper6: Robot) -> None:
     """An on-board filter's attitude (gyro + star tracker): errors correlated in time, smaller than the star tracker's."""
     d = diagnose(IdentificationModel(paper6, "fuel"), _log(paper6, None, "fused"))
     assert d.verdict == NO_MISSING_EFFECT, d.reason
+
+
+@pytest.mark.parametrize(("attitude", "dependent"), [("fused", True), ("star_tracker_5arcsec", False)])
+def test_an_attitude_fused_with_the_gyro_is_not_taken_for_a_second_measurement(attitude: str, dependent: bool) -> None:
+    """A clean 20 Hz log of paper6 whose attitude is an on-board estimate fused with the same gyro: its steps are the
+    gyro's noise integrated, so both channels counted the gyro's noise twice and named gyro_scale or slosh (likelihood
+    ratios 50 and 28). The dependence is detected (and only there: not for a star tracker or an exact attitude) and
+    the verdict rests on the gyro alone: none."""
+    env = simulate_variation(draw_variation("none", 505, {"attitude": attitude}), 60.0)
+    d = diagnose(IdentificationModel(env.robot, "fuel"), env.measurement_log())
+    assert d.verdict == NO_MISSING_EFFECT, d.reason
+    assert d.attitude_rejected is dependent
+    assert ("fused with this gyro" in d.reason) is dependent
+
+
+@pytest.mark.parametrize(("attitude", "dependent"), [("fused", True), ("star_tracker_1arcsec", False), ("exact", False)])
+def test_the_dependence_of_attitude_and_gyro_is_seen_only_in_a_fused_attitude(attitude: str, dependent: bool) -> None:
+    """The correlation of the two channels' high-frequency residual steps, at the true parameters of a log with a
+    momentum hidden (what a missing effect puts in both channels is slow and must not look like dependence)."""
+    env = simulate_variation(draw_variation("initial_momentum", 506, {"attitude": attitude, "rate_hz": 50}), 30.0)
+    log, truth = env.measurement_log(), truth_of(env)
+    model = IdentificationModel(env.robot, "fuel")
+    theta = true_parameters(model, truth)
+    channel = AttitudeChannel.of(model, log)
+    assert theta is not None and channel is not None
+    gyro_residual = model.problem(log).residuals(theta, count=False).reshape(-1, 3)
+    rho, p = attitude_gyro_dependence(channel.differences(theta), gyro_residual, np.diff(log.t_s))
+    assert (p < 1e-6) is dependent, (rho, p)
+    if not dependent:
+        assert p > 1e-3, (rho, p)
 
 
 @pytest.mark.parametrize(

@@ -62,7 +62,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
-from scipy.stats import chi2
+from scipy.stats import chi2, norm
 from threadpoolctl import threadpool_limits
 
 from estimators.base import Estimator
@@ -340,8 +340,9 @@ def fit_model(
             assert weights is not None
             # the gyro's minimum nearest each start, the best of them by both channels, refined on both; then the
             # attitude error model refitted at this model's fit and the fit refined under it (profile likelihood)
-            scores = [_joint_chi2(problem, channel, weights, x) for x in results]
-            theta = _joint_fit(problem, channel, weights, results[int(np.argmin(scores))])
+            tried = [*results, *(np.clip(x, problem.parameters.lower, problem.parameters.upper) for x in starts)]
+            scores = [_joint_chi2(problem, channel, weights, x) for x in tried]
+            theta = _joint_fit(problem, channel, weights, tried[int(np.argmin(scores))])
             if profile_noise:
                 own = ChannelWeights(weights.gyro_std_rad_s, channel.estimate_noise(theta, weights.attitude))
                 theta = _joint_fit(problem, channel, own, theta)
@@ -502,7 +503,22 @@ def diagnose(
         raise SpaceIdInputError(f"candidates: unknown effects {unknown}; expected names from {', '.join(EFFECT_TERMS)}")
     baseline, estimate = fit_model(model, log, estimator or make_estimator("hybrid"))
     channel = AttitudeChannel.of(model, log)
+    dependence = None
+    if channel is not None:
+        gyro_residual = model.problem(log).residuals(baseline.theta, count=False).reshape(-1, 3)
+        dependence = attitude_gyro_dependence(channel.differences(baseline.theta), gyro_residual, np.diff(log.t_s))
+        if dependence[1] >= alpha:
+            dependence = None
+        else:
+            channel = None
     diagnosis = _diagnose(model, log, names, baseline, alpha, channel)
+    if dependence is not None:
+        diagnosis.reason = (
+            f"the attitude's steps follow the gyro's own noise (correlation {dependence[0]:+.2f} of their high-frequency "
+            f"parts, p = {dependence[1]:.2g}): an attitude estimate fused with this gyro, not an independent measurement, "
+            f"so the verdict rests on the gyro alone; {diagnosis.reason}"
+        )
+        diagnosis.attitude_rejected = True
     if channel is not None and not diagnosis.attitude_consistent:
         p_best = max(f.attitude_white_p for f in [diagnosis.baseline, *diagnosis.candidates])
         diagnosis = _diagnose(model, log, names, baseline, alpha, None)
@@ -529,7 +545,15 @@ def _diagnose(
     if channel is not None:
         # both channels from here on; the star tracker's noise from the data, the baseline refitted to both
         weights = ChannelWeights(sigma0, channel.estimate_noise(baseline.theta))
-        baseline = fit_model(model, log, starts=[baseline.theta], weights=weights, channel=channel, profile_noise=True)[0]
+        # the baseline refitted on both channels with its error model, twice: the second pass is what every candidate
+        # gets from the baseline's state (a fit under its error model, the error model refitted, the fit refined), so
+        # that no candidate gains from one more round of the alternation than the baseline had
+        for _ in range(2):
+            baseline = fit_model(model, log, starts=[baseline.theta], weights=weights, channel=channel, profile_noise=True)[0]
+            assert baseline.attitude_noise is not None
+            weights = ChannelWeights(sigma0, baseline.attitude_noise)
+        # the baseline's own error model weights every candidate's fit and is the reference of the log-determinants
+        baseline.attitude_chi2 = channel.chi2(baseline.theta, weights.attitude)
     fits = []
     for name in names:
         extended = candidate_model(model, name)
@@ -543,6 +567,7 @@ def _diagnose(
         grid = [np.concatenate((baseline.theta, s)) for s in term.grid(baseline.theta[:k_base])]
         starts = best_of_grid(problem, grid, None if channel is None else AttitudeChannel.of(extended, log), weights)
         starts.append(np.concatenate((restart, term.starts(restart[:k_base])[0])))
+        starts.append(np.concatenate((baseline.theta, term.nominal)))  # the baseline itself: the nested model's fit
         fits.append(fit_model(extended, log, starts=starts, effect=name, weights=weights, problem=problem, profile_noise=True)[0])
     gyro_residual = model.problem(log).residuals(baseline.theta, count=False).reshape(-1, 3)
     sigma = _score(baseline, fits, alpha, difference_noise_std(gyro_residual))
@@ -555,6 +580,27 @@ def _diagnose(
     verdict, reason = _verdict(baseline, fits, analysis, alpha, combined)
     fits.sort(key=lambda f: (f.effect != verdict, f.bic))
     return Diagnosis(verdict, baseline, fits, analysis, sigma, alpha, reason, weights, combined=combined)
+
+
+def attitude_gyro_dependence(differences: FloatArray, gyro_residual: FloatArray, dt_s: FloatArray) -> tuple[float, float]:
+    """Whether the attitude residual's steps carry the gyro's own noise: ``(rho, p)``, the correlation of their
+    high-frequency parts and its two-sided p-value against independence.
+
+    ``differences`` (T-1, 3), rad: the attitude residual's steps (:meth:`AttitudeChannel.differences`); ``gyro_residual``
+    (T, 3), rad/s; ``dt_s`` (T-1,). The gyro's residual is taken to the same steps (mean of the step's two samples
+    times its length), then both are differenced once more: that removes what a missing effect puts in both
+    channels (slow), and leaves the noise. An independent attitude source (a star tracker, an exact attitude) gives
+    ``rho`` near 0 (``sqrt(n) rho`` standard normal); an on-board estimate fused with this gyro follows the gyro
+    between star-tracker updates, and its steps are the gyro's noise times the step: ``|rho|`` near 1.
+    """
+    gyro_steps = 0.5 * (gyro_residual[1:] + gyro_residual[:-1]) * dt_s[:, None]
+    a = np.diff(differences, axis=0).ravel()
+    b = np.diff(gyro_steps, axis=0).ravel()
+    denominator = math.sqrt(float(a @ a) * float(b @ b))
+    if denominator == 0.0:
+        return 0.0, 1.0
+    rho = float(a @ b) / denominator
+    return rho, float(2.0 * norm.sf(abs(rho) * math.sqrt(a.size)))
 
 
 #: how many of a term's grid candidates (:meth:`~estimators.models.effects.EffectTerm.grid`) start local fits

@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 from scipy.stats import chi2, ncx2
 
-from estimators.diagnostics.diagnose import DEFAULT_CANDIDATES, candidate_model
+from estimators.diagnostics.diagnose import DEFAULT_CANDIDATES, attitude_gyro_dependence, candidate_model
 from estimators.diagnostics.workflow import true_parameters
 from estimators.models.attitude_channel import AttitudeChannel
 from estimators.problem import IdentificationModel
@@ -41,9 +41,13 @@ from spaceid_gym.log import MeasurementLog
 ONLY_WITH_EFFECT: dict[str, tuple[str, ...]] = {"slosh": ("slosh_frequency_hz", "slosh_damping_ratio")}
 
 
-def non_centrality(model_without_effect: IdentificationModel, effect: str, log: MeasurementLog, truth: dict[str, Any]) -> float:
+def non_centrality(
+    model_without_effect: IdentificationModel, effect: str, log: MeasurementLog, truth: dict[str, Any], alpha: float = 0.01
+) -> float:
     """``lambda`` of ``effect``'s likelihood ratio against ``model_without_effect`` on ``log``, at ``truth``
     (truth.json's keys: the fuel state, ``hidden_effects`` and ``noise["gyro_std_rad_s"]``); see the module docstring.
+    The attitude channel counts only where ``diagnose`` would use it: not when its steps follow the gyro's noise
+    (:func:`~estimators.diagnostics.diagnose.attitude_gyro_dependence` at the truth, at level ``alpha``).
 
     Raises:
         SpaceIdInputError: the truth lacks the model's unknowns or the gyro's noise, or the model already has ``effect``.
@@ -66,6 +70,11 @@ def non_centrality(model_without_effect: IdentificationModel, effect: str, log: 
         effect_off[index] = theta[k + index]
     fisher = problem.fisher(theta, float(gyro_std))
     channel = AttitudeChannel.of(model, log)
+    if channel is not None:
+        # as diagnose: an attitude that follows this gyro's noise (a fused estimate) is no second measurement
+        gyro_residual = problem.residuals(theta, count=False).reshape(-1, 3)
+        if attitude_gyro_dependence(channel.differences(theta), gyro_residual, np.diff(log.t_s))[1] < alpha:
+            channel = None
     if channel is not None:
         # the attitude residual's error model at the truth: the source's noise and the model's own wander
         fisher = fisher + channel.fisher(theta, channel.estimate_noise(theta))
@@ -99,5 +108,5 @@ def expected_power(
 ) -> float:
     """The expected power of ``diagnose``'s test of ``effect`` on ``log`` (see the module docstring):
     :func:`power_of` of :func:`non_centrality`."""
-    lam = non_centrality(model_without_effect, effect, log, truth)
+    lam = non_centrality(model_without_effect, effect, log, truth, alpha)
     return power_of(lam, effect_dof(model_without_effect, effect), alpha, n_candidates)
