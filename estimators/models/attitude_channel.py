@@ -49,6 +49,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 from scipy.linalg import cholesky_banded, solve_banded
 from scipy.optimize import minimize
@@ -156,9 +157,30 @@ def _filtered_factor(white_std: float, walk_std: float, phi: float, n: int) -> F
 def _negative_log_likelihood(x: FloatArray, differences: FloatArray) -> float:
     """``-log L`` (up to a constant) of one axis's differences (n,) for ``x = [log sw, log snu, logit phi]``."""
     phi = MAX_CORRELATION / (1.0 + math.exp(-x[2]))
-    factor = _filtered_factor(math.exp(x[0]), math.exp(x[1]), phi, len(differences) - 1)
-    whitened = solve_banded((2, 0), factor, differences[1:] - phi * differences[:-1], check_finite=False)
-    return float(np.sum(np.log(factor[0])) + 0.5 * whitened @ whitened)
+    sw2, snu2 = max(math.exp(x[0]), MIN_STD_RAD) ** 2, max(math.exp(x[1]), MIN_STD_RAD) ** 2
+    return _whitened_log_likelihood(sw2, snu2, phi, differences)
+
+
+@njit(cache=True)
+def _whitened_log_likelihood(sw2: float, snu2: float, phi: float, d: FloatArray) -> float:
+    """``sum log L_jj + |L^-1 u|^2 / 2`` for ``u = d_k - phi d_{k-1}`` and ``L`` the Cholesky factor of the covariance of
+    :func:`_filtered_factor`, in one pass: each row of ``L`` (three numbers, the covariance is banded Toeplitz) and
+    the forward substitution as they come, without storing either."""
+    c0 = sw2 * (1.0 + (1.0 + phi) ** 2 + phi * phi) + snu2
+    c1 = -sw2 * (1.0 + phi) ** 2
+    c2 = sw2 * phi
+    log_det, chi2 = 0.0, 0.0
+    diag1, diag2, sub1 = 1.0, 1.0, 0.0  # L[j-1, j-1], L[j-2, j-2], L[j-1, j-2]
+    w1, w2 = 0.0, 0.0  # the whitened values of rows j-1 and j-2
+    for j in range(len(d) - 1):
+        far = c2 / diag2 if j >= 2 else 0.0  # L[j, j-2]
+        near = (c1 - far * sub1) / diag1 if j >= 1 else 0.0  # L[j, j-1]
+        diag = math.sqrt(c0 - far * far - near * near)
+        w = (d[j + 1] - phi * d[j] - far * w2 - near * w1) / diag
+        log_det += math.log(diag)
+        chi2 += w * w
+        diag2, diag1, sub1, w2, w1 = diag1, diag, near, w1, w
+    return log_det + 0.5 * chi2
 
 
 def fit_attitude_noise(differences: FloatArray, start: AttitudeNoise | None = None) -> AttitudeNoise:
