@@ -19,7 +19,7 @@ from agents.excitation import FourierExcitation
 from estimators.diagnostics.diagnose import NO_MISSING_EFFECT, attitude_gyro_dependence, diagnose, low_frequency_p_value
 from estimators.diagnostics.suite import DIAGNOSTIC_EXCITATION
 from estimators.diagnostics.workflow import true_parameters
-from estimators.models.attitude_channel import AttitudeChannel, AttitudeNoise, fit_attitude_noise
+from estimators.models.attitude_channel import AttitudeChannel, AttitudeNoise, _negative_log_likelihood, fit_attitude_noise
 from estimators.problem import IdentificationModel
 from spaceid_gym.datasets import simulate_episode
 from spaceid_gym.log import MeasurementLog
@@ -173,6 +173,16 @@ def test_the_low_frequency_test_flags_unmodelled_slow_power() -> None:
     rng = np.random.default_rng(0)
     slow = np.cumsum(0.05 * rng.standard_normal((3000, 3)), axis=0)
     assert low_frequency_p_value(rng.standard_normal((3000, 3)) + slow, 50) < 1e-6
+
+
+def test_the_error_models_fit_survives_a_simplex_that_wanders_far() -> None:
+    """The likelihood is flat, not an overflow, far outside the explored range (a held-out log raised OverflowError
+    when the simplex stepped to exp(800)); a residual of exact zeros fits the smallest stds."""
+    d = np.random.default_rng(0).standard_normal(500) * 1e-6
+    assert np.isfinite(_negative_log_likelihood(np.array([800.0, -900.0, 1e5]), d))
+    assert np.isfinite(_negative_log_likelihood(np.array([-800.0, 900.0, -1e5]), d))
+    noise = fit_attitude_noise(np.zeros((200, 3)))
+    assert max(noise.white_std_rad) <= 1e-9 and max(noise.walk_std_rad) <= 1e-9
 
 
 def test_attitude_noise_round_trip_and_bad_values() -> None:

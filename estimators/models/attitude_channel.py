@@ -51,7 +51,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
-from scipy.linalg import cholesky_banded, solve_banded
+from scipy.linalg import cholesky_banded
 from scipy.optimize import minimize
 from scipy.spatial.transform import Rotation, Slerp
 
@@ -75,6 +75,9 @@ class BaseRateProblem(Protocol):
 #: the smallest std (rad) either part of :class:`AttitudeNoise` may have: keeps the whitening finite on a
 #: noise-free log (the midpoint rule's own error there is ~1e-9 rad per step)
 MIN_STD_RAD = 1e-10
+
+#: the range of the log-stds the error model's fit explores (:func:`fit_attitude_noise`): MIN_STD_RAD to 1 rad
+LOG_STD_LIMITS = (math.log(MIN_STD_RAD), 0.0)
 
 #: the largest step correlation ``phi`` fitted (:func:`fit_attitude_noise`)
 MAX_CORRELATION = 0.999
@@ -140,8 +143,26 @@ class AttitudeNoise:
         out = np.empty((differences.shape[0] - 1, *differences.shape[1:]))
         for axis, (phi, factor) in enumerate(zip(self.walk_correlation, factors, strict=True)):
             d = differences[:, axis]
-            out[:, axis] = solve_banded((2, 0), factor, d[1:] - phi * d[:-1], check_finite=False)
+            u = d[1:] - phi * d[:-1]
+            out[:, axis] = _lower_banded_solve(factor, np.ascontiguousarray(u.reshape(len(u), -1))).reshape(u.shape)
         return out
+
+
+@njit(cache=True)
+def _lower_banded_solve(factor: FloatArray, rhs: FloatArray) -> FloatArray:
+    """``L^-1 rhs`` (n, m) by forward substitution, for ``L`` a lower factor of bandwidth 2 in LAPACK's band storage
+    (3, n) (row ``r`` holds ``L[j + r, j]``, as :func:`_filtered_factor` gives it) and ``rhs`` (n, m)."""
+    n, m = rhs.shape
+    out = np.empty((n, m))
+    for j in range(n):
+        for c in range(m):
+            value = rhs[j, c]
+            if j >= 2:
+                value -= factor[2, j - 2] * out[j - 2, c]
+            if j >= 1:
+                value -= factor[1, j - 1] * out[j - 1, c]
+            out[j, c] = value / factor[0, j]
+    return out
 
 
 def _filtered_factor(white_std: float, walk_std: float, phi: float, n: int) -> FloatArray:
@@ -156,8 +177,11 @@ def _filtered_factor(white_std: float, walk_std: float, phi: float, n: int) -> F
 
 def _negative_log_likelihood(x: FloatArray, differences: FloatArray) -> float:
     """``-log L`` (up to a constant) of one axis's differences (n,) for ``x = [log sw, log snu, logit phi]``."""
-    phi = MAX_CORRELATION / (1.0 + math.exp(-x[2]))
-    sw2, snu2 = max(math.exp(x[0]), MIN_STD_RAD) ** 2, max(math.exp(x[1]), MIN_STD_RAD) ** 2
+    # outside these the likelihood is flat (a std below MIN_STD_RAD or above 1 rad, phi at 0 or its cap), and exp
+    # would overflow where the simplex wanders
+    log_sw, log_snu = (min(max(v, LOG_STD_LIMITS[0]), LOG_STD_LIMITS[1]) for v in x[:2])
+    phi = MAX_CORRELATION / (1.0 + math.exp(-min(max(x[2], -50.0), 50.0)))
+    sw2, snu2 = max(math.exp(log_sw), MIN_STD_RAD) ** 2, max(math.exp(log_snu), MIN_STD_RAD) ** 2
     return _whitened_log_likelihood(sw2, snu2, phi, differences)
 
 
