@@ -763,8 +763,36 @@ class EffectPrediction:
     ) -> tuple[FloatArray, FloatArray]:
         """For composite parameters, each term's ``theta`` (P, k_e) and the base parameterisation's unknowns
         ``theta_base`` (P, k_base) (they place a slosh mass and bound it by the liquid left): the base's own rate
-        (base body frame) and what the gyro reads (after the measurement effects), each (P, T', 3), rad/s."""
+        (base body frame) and what the gyro reads (after the measurement effects), each (P, T', 3), rad/s.
+
+        Parameter sets that differ only in the measurement effects' unknowns (a difference Jacobian's columns of
+        those) share one base rate, computed once."""
         span = slice(None) if self.needs_whole_log else samples
+        rotating = [effect_thetas[t] for t in self.terms if t.stage != "measurement"]
+        keys = np.hstack([base10, *([] if payload10 is None else [payload10]), *rotating, theta_base])
+        _, rows, shared = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+        if len(rows) == len(keys):
+            true_rate = self._base_rate(base10, payload10, effect_thetas, theta_base, span)
+        else:
+            chosen = {term: theta[rows] for term, theta in effect_thetas.items()}
+            payload = None if payload10 is None else payload10[rows]
+            true_rate = self._base_rate(base10[rows], payload, chosen, theta_base[rows], span)[shared.reshape(-1)]
+        measured = true_rate
+        for term in self.measurement_terms:
+            measured = term.measure(measured, effect_thetas[term], self.context)  # type: ignore[attr-defined]
+        if self.needs_whole_log:
+            return true_rate[:, samples], measured[:, samples]
+        return true_rate, measured
+
+    def _base_rate(
+        self,
+        base10: FloatArray,
+        payload10: FloatArray | None,
+        effect_thetas: dict[EffectTerm, FloatArray],
+        theta_base: FloatArray,
+        span: slice | NDArray[np.intp],
+    ) -> FloatArray:
+        """The base's own rate (P, T', 3) over ``span`` (see :meth:`predict`)."""
         n_p = base10.shape[0]
         extra = None
         for term in self.momentum_terms:
@@ -784,10 +812,4 @@ class EffectPrediction:
             relative, moved = self.slosh.momentum(rest_twist, theta_slosh, tank_m, composite, self.context)
             carried = -relative if extra is None else extra - relative
             twist = self.momentum_model.predict_twist(base10, payload10, carried, span, moved)
-        true_rate = np.ascontiguousarray(twist[..., 3:])
-        measured = true_rate
-        for term in self.measurement_terms:
-            measured = term.measure(measured, effect_thetas[term], self.context)  # type: ignore[attr-defined]
-        if self.needs_whole_log:
-            return true_rate[:, samples], measured[:, samples]
-        return true_rate, measured
+        return np.ascontiguousarray(twist[..., 3:])
