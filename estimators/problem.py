@@ -41,6 +41,9 @@ FloatArray = NDArray[np.float64]
 #: a parameter is identifiable if its Cramér-Rao std is below this fraction of its search range
 IDENTIFIABLE_FRACTION = 0.25
 
+#: how many Jacobians a problem keeps, to answer a request at the same parameters again (:meth:`IdentificationProblem.jacobian`)
+REMEMBERED_JACOBIANS = 4
+
 
 class IdentificationModel:
     """What is identified: robot, parameterisation and noise model (independent of any log).
@@ -181,6 +184,7 @@ class IdentificationProblem:
         self.measured = np.ascontiguousarray(log.omega_base_body_rad_s, dtype=float)
         self.n_samples = log.n_samples
         self.n_model_samples = 0
+        self._jacobians: dict[tuple[str, bytes], FloatArray] = {}  # the last few Jacobians (:meth:`_remembered`)
 
     @property
     def n_params(self) -> int:
@@ -219,7 +223,7 @@ class IdentificationProblem:
         """``d base_rate / d theta`` (3T, k) at ``theta`` (k,): :meth:`jacobian` of :meth:`base_rate`."""
         if self._effects is None:
             return self.jacobian(theta, count)
-        return self._difference_jacobian(np.asarray(theta, dtype=float), count, self.base_rate)
+        return self._remembered("base_rate", np.asarray(theta, dtype=float), count, self._base_rate_jacobian)
 
     def gyro_error(self, theta: FloatArray) -> FloatArray:
         """What the measurement effects add to the base rate, ``omega_gyro - omega_base`` (T, 3), rad/s, at ``theta`` (k,).
@@ -268,34 +272,51 @@ class IdentificationProblem:
         return (self.predict(theta, count=count)[0] - self.measured).ravel()
 
     def jacobian(self, theta: FloatArray, count: bool = True) -> FloatArray:
-        """``d predicted / d theta`` (3T, k) at ``theta`` (k,), analytic; counted as k evaluations."""
-        theta = np.asarray(theta, dtype=float)
+        """``d predicted / d theta`` (3T, k) at ``theta`` (k,), analytic (counted as k evaluations) or, with effects, by
+        central differences (:meth:`_difference_jacobian`, counted as 2k)."""
+        return self._remembered("predict", np.asarray(theta, dtype=float), count, self._predict_jacobian)
+
+    def _predict_jacobian(self, theta: FloatArray) -> FloatArray:
+        """:meth:`jacobian`, not counted."""
         if self._effects is not None:
-            return self._difference_jacobian(theta, count)
+            return self._difference_jacobian(theta, self.predict)
         base10, payload10 = self.parameters.composite(theta)
         d_base, d_payload = self.parameters.composite_jacobian(theta)
         j_base, j_payload = self.momentum.jacobian(base10[0], None if payload10 is None else payload10[0])
         jac = j_base @ d_base
         if j_payload is not None and d_payload is not None:
             jac = jac + j_payload @ d_payload
-        if count:
-            self.n_model_samples += self.n_params * self.n_samples
         return jac.reshape(-1, self.n_params)
 
-    def _difference_jacobian(
-        self, theta: FloatArray, count: bool, predict: Callable[..., FloatArray] | None = None
-    ) -> FloatArray:
-        """Central differences (3T, k) of ``predict`` (default :meth:`predict`) with steps of 1e-6 of each search
-        width (effects: no analytic Jacobian).
+    def _base_rate_jacobian(self, theta: FloatArray) -> FloatArray:
+        """:meth:`base_rate_jacobian` with effects, not counted."""
+        return self._difference_jacobian(theta, self.base_rate)
 
-        All 2k points go through one batched prediction; counted as 2k evaluations.
-        """
+    def _remembered(self, kind: str, theta: FloatArray, count: bool, compute: Callable[[FloatArray], FloatArray]) -> FloatArray:
+        """``compute(theta)`` (3T, k), or a copy of it when one of the last :data:`REMEMBERED_JACOBIANS` Jacobians of
+        this ``kind`` was at the same ``theta`` (k,): a least-squares fit asks for the Jacobian where the fit before it
+        ended, and its caller asks again where it ends. Counted as computed either way (k or 2k evaluations, see
+        :meth:`jacobian`), so that the budget does not depend on what was remembered."""
+        key = (kind, theta.tobytes())
+        jac = self._jacobians.pop(key, None)
+        if jac is None:
+            jac = compute(theta)
+        self._jacobians[key] = jac  # the most recent last
+        if len(self._jacobians) > REMEMBERED_JACOBIANS:
+            del self._jacobians[next(iter(self._jacobians))]
+        if count:
+            self.n_model_samples += self.n_params * self.n_samples * (1 if self._effects is None else 2)
+        return jac.copy()
+
+    def _difference_jacobian(self, theta: FloatArray, predict: Callable[..., FloatArray]) -> FloatArray:
+        """Central differences (3T, k) of ``predict`` (:meth:`predict` or :meth:`base_rate`) with steps of 1e-6 of each
+        search width (effects: no analytic Jacobian); all 2k points go through one batched prediction, not counted."""
         step = 1e-6 * self.parameters.width
         points = np.repeat(theta[None], 2 * self.n_params, axis=0)
         index = np.arange(self.n_params)
         points[2 * index, index] += step
         points[2 * index + 1, index] -= step
-        omega = (predict or self.predict)(points, count=count)  # (2k, T, 3)
+        omega = predict(points, count=False)  # (2k, T, 3)
         jac = (omega[0::2] - omega[1::2]) / (2.0 * step[:, None, None])
         return jac.reshape(self.n_params, -1).T
 
