@@ -768,21 +768,42 @@ class EffectPrediction:
         Parameter sets that differ only in the measurement effects' unknowns (a difference Jacobian's columns of
         those) share one base rate, computed once."""
         span = slice(None) if self.needs_whole_log else samples
-        rotating = [effect_thetas[t] for t in self.terms if t.stage != "measurement"]
-        keys = np.hstack([base10, *([] if payload10 is None else [payload10]), *rotating, theta_base])
-        _, rows, shared = np.unique(keys, axis=0, return_index=True, return_inverse=True)
-        if len(rows) == len(keys):
+        sharing = self._sharing(base10, payload10, effect_thetas, theta_base)
+        if sharing is None:
             true_rate = self._base_rate(base10, payload10, effect_thetas, theta_base, span)
         else:
+            rows, shared = sharing
             chosen = {term: theta[rows] for term, theta in effect_thetas.items()}
             payload = None if payload10 is None else payload10[rows]
-            true_rate = self._base_rate(base10[rows], payload, chosen, theta_base[rows], span)[shared.reshape(-1)]
+            true_rate = self._base_rate(base10[rows], payload, chosen, theta_base[rows], span)[shared]
         measured = true_rate
         for term in self.measurement_terms:
             measured = term.measure(measured, effect_thetas[term], self.context)  # type: ignore[attr-defined]
         if self.needs_whole_log:
             return true_rate[:, samples], measured[:, samples]
         return true_rate, measured
+
+    def _sharing(
+        self,
+        base10: FloatArray,
+        payload10: FloatArray | None,
+        effect_thetas: dict[EffectTerm, FloatArray],
+        theta_base: FloatArray,
+    ) -> tuple[NDArray[np.intp], NDArray[np.intp]] | None:
+        """For parameter sets (see :meth:`predict`) of which some differ only in the measurement effects' unknowns:
+        the first of each group (G,) and each set's group (P,); ``None`` when each needs its own base rate."""
+        if not self.measurement_terms:
+            return None
+        rotating = [effect_thetas[t] for t in self.terms if t.stage != "measurement"]
+        keys = np.hstack([base10, *([] if payload10 is None else [payload10]), *rotating, theta_base])
+        first: dict[bytes, int] = {}
+        rows, shared = [], []
+        for i, row in enumerate(keys):
+            group = first.setdefault(row.tobytes(), len(rows))
+            if group == len(rows):
+                rows.append(i)
+            shared.append(group)
+        return None if len(rows) == len(keys) else (np.array(rows), np.array(shared))
 
     def _base_rate(
         self,
