@@ -193,6 +193,9 @@ POLISH_ITERATIONS = 100
 #: (on the cost relative to the unconstrained least-squares minimum, per factor coordinate)
 CONSISTENT_POLISH_ITERATIONS = 500
 CONSISTENT_POLISH_GTOL = 1e-10
+#: the most exact trust-region steps after the Lanczos ones collapsed (enough to leave a saddle; on the real UR5 logs
+#: they mostly collapse at the optimum to rounding, 1e-5 of the cost, where more exact steps only cost time)
+CONSISTENT_POLISH_EXACT_ITERATIONS = 50
 #: friction roots of the polish's start are at least this (coefficient ``scale w^2`` >= 0.0025 of its search bound)
 POLISH_ROOT_FLOOR = 0.05
 
@@ -214,8 +217,8 @@ def _polished_consistent(problem: Any, consistency: PhysicalConsistency, start: 
     zero: a friction coefficient on its bound (the colony's box clips to it) has ``w = 0``, zero gradient and no
     coupling to the other coordinates, a direction the Lanczos steps never see (measured: one colony seed of 20
     stopped 51 % above the optimum there). So friction roots start at least ``POLISH_ROOT_FLOOR``, and if the trust
-    region still collapses, the descent continues with exact trust-region steps (``trust-exact``, which follow
-    negative curvature). The cost is divided by ``c_ls`` (relative units); each gradient counts D evaluations.
+    region still collapses, the descent continues with at most ``CONSISTENT_POLISH_EXACT_ITERATIONS`` exact
+    trust-region steps (``trust-exact``, which follow negative curvature). The cost is divided by ``c_ls`` (relative units); each gradient counts D evaluations.
     """
     if not isinstance(problem, LinearIdentificationProblem):
         raise SpaceIdInputError(
@@ -232,7 +235,8 @@ def _polished_consistent(problem: Any, consistency: PhysicalConsistency, start: 
     def cost(y: FloatArray) -> float:
         problem.n_model_samples += problem.n_samples
         r = residual(y)
-        return float(r @ r) / scale
+        value = float(r @ r) / scale
+        return value if np.isfinite(value) else np.inf  # a wild trial step: rejected by the trust region
 
     def gradient(y: FloatArray) -> FloatArray:
         problem.n_model_samples += len(y) * problem.n_samples
@@ -243,11 +247,13 @@ def _polished_consistent(problem: Any, consistency: PhysicalConsistency, start: 
         return 2.0 * (jacobian.T @ jacobian + consistency.factor_curvature(data.T @ residual(y))) / scale
 
     options = {"maxiter": CONSISTENT_POLISH_ITERATIONS, "gtol": CONSISTENT_POLISH_GTOL}
-    with threadpool_limits(limits=1):  # 100-dimensional algebra: BLAS threads only contend on a busy machine
+    # 100-dimensional algebra: BLAS threads only contend on a busy machine; a wild trial step may overflow (rejected)
+    with threadpool_limits(limits=1), np.errstate(over="ignore", invalid="ignore"):
         start_factor = consistency.factor_from_search(start, root_floor=POLISH_ROOT_FLOOR)
         result = minimize(cost, start_factor, jac=gradient, hess=hessian, method="trust-krylov", options=options)
         facts = {"polish_iterations": int(result.nit), "polish_converged": bool(result.success), "polish_restarted": False}
         if result.status == 2:  # the trust region collapsed (a saddle the Lanczos steps do not leave): exact steps
+            options["maxiter"] = CONSISTENT_POLISH_EXACT_ITERATIONS
             result = minimize(cost, result.x, jac=gradient, hess=hessian, method="trust-exact", options=options)
             facts.update(polish_iterations=facts["polish_iterations"] + int(result.nit), polish_restarted=True)
     facts["polish_converged"] = bool(result.success)

@@ -347,7 +347,7 @@ def cross_validation_markdown(rows: Sequence[CrossValidationRow], joint_names: S
         time_s = float(np.mean([r.wall_time_s for r in members]))
         lines.append(
             f"| **{model}** | **{estimator}** | **mean of {len(members)}** | {' | '.join(f'**{v:.1f}**' for v in mean)} | "
-            f"**{overall:.1f}** | {summary} | {_percent(_largest_excess(members))} (max) | {time_s:.2f} |"
+            f"**{overall:.1f}** | {summary} | {_percent(_largest_excess(members), ' (largest)')} | {time_s:.2f} |"
         )
     return header + "\n".join(lines) + "\n"
 
@@ -358,8 +358,8 @@ def _largest_excess(rows: Sequence[CrossValidationRow]) -> float | None:
     return None if not excess or any(e is None for e in excess) else max(e for e in excess if e is not None)
 
 
-def _percent(value: float | None) -> str:
-    return "" if value is None else f"{100.0 * value:+.4f}"
+def _percent(value: float | None, suffix: str = "") -> str:
+    return "" if value is None else f"{100.0 * value:+.4f}{suffix}"
 
 
 def _grouped(rows: Sequence[CrossValidationRow]) -> dict[tuple[str, str], list[CrossValidationRow]]:

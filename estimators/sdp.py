@@ -247,10 +247,13 @@ def excess_over_optimum(problem: LinearIdentificationProblem, cost: float) -> di
     """How far a consistent estimate's ``cost`` on ``problem`` lies above :func:`consistent_optimum` of the same cost,
     for the estimate's ``extra``: ``sdp_cost``, ``cost_excess_over_sdp`` (``(cost - sdp) / sdp``; slightly negative
     is possible, by the regulariser's trade of the module docstring), ``sdp_solver``, ``sdp_solve_time_s``; without
-    cvxpy ``None`` and the reason."""
+    cvxpy, or if no solver solves the program, ``None`` and the reason (``sdp_unavailable``)."""
     if cp is None:
         return {"sdp_cost": None, "cost_excess_over_sdp": None, "sdp_unavailable": "cvxpy is not installed"}
-    optimum = consistent_optimum(problem)
+    try:
+        optimum = consistent_optimum(problem)
+    except RuntimeError as exc:  # neither solver solved it: the fit stands, without its reference
+        return {"sdp_cost": None, "cost_excess_over_sdp": None, "sdp_unavailable": str(exc)}
     return {
         "sdp_cost": optimum.cost,
         "cost_excess_over_sdp": (cost - optimum.cost) / max(optimum.cost, np.finfo(float).tiny),

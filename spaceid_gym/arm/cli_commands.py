@@ -253,7 +253,7 @@ def run_arm_cross_validate(args: argparse.Namespace) -> None:
     preparation, logs, floors = _movements(args, _names(args.movements))
     specs = parse_estimator_specs(args.estimators)
     estimators = {spec: estimator_from_spec(spec, seed=args.seed) for spec in specs}
-    label = args.friction if parse_friction(args.friction) else "no friction"
+    label = (args.friction if parse_friction(args.friction) else "no friction") + (" + armature" if args.armature else "")
     models = {f"with {label}": _model(args)}
     if args.compare_without_friction:
         models["without friction"] = _model(args, ())
