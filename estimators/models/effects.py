@@ -238,7 +238,23 @@ class InitialMomentum(_VectorTerm):
 
     def angular_momentum(self, theta: FloatArray, context: EffectContext) -> FloatArray:
         """System angular momentum in base axes (P, T, 3) for ``theta`` (P, 3)."""
-        return np.einsum("tji,pj->pti", context.rot_rel, theta)
+        return _in_base_axes(context.rot_rel, np.ascontiguousarray(theta[:, None, :], dtype=float))
+
+
+@njit(cache=True)
+def _in_base_axes(rot_rel: FloatArray, vectors: FloatArray) -> FloatArray:
+    """``R_rel(t)^T v`` (P, T, 3) for ``R_rel`` (T, 3, 3) and vectors in the first sample's axes (P, T, 3), or (P, 1, 3)
+    for the same vector at every sample. The products are summed in the order of the ``einsum`` this replaces (bit
+    for bit the same)."""
+    n_p, n_t = vectors.shape[0], rot_rel.shape[0]
+    out = np.empty((n_p, n_t, 3))
+    for p in range(n_p):
+        for t in range(n_t):
+            s = t if vectors.shape[1] > 1 else 0
+            v0, v1, v2 = vectors[p, s, 0], vectors[p, s, 1], vectors[p, s, 2]
+            for i in range(3):
+                out[p, t, i] = (rot_rel[t, 0, i] * v0 + rot_rel[t, 1, i] * v1) + rot_rel[t, 2, i] * v2
+    return out
 
 
 class ExternalTorque(EffectTerm):
@@ -274,7 +290,7 @@ class ExternalTorque(EffectTerm):
         inertial = theta[:, None, 0:3] + theta[:, None, 3:6] * t[None, :, None]
         if self.drift:
             inertial = inertial + 0.5 * theta[:, None, 6:9] * (t * t)[None, :, None]
-        return np.einsum("tji,ptj->pti", context.rot_rel, inertial)
+        return _in_base_axes(context.rot_rel, np.ascontiguousarray(inertial, dtype=float))
 
     @property
     def spec(self) -> str:
