@@ -374,7 +374,9 @@ class AttitudeChannel:
         (:func:`truncation_shape`), out of the residual, one free size per axis (3 fewer values)."""
         shape = np.asarray(shape, dtype=float)
         if shape.shape != self.measured.shape or not np.all(np.isfinite(shape)):
-            raise SpaceIdInputError(f"attitude channel: truncation shape expected {self.measured.shape} finite, got {shape.shape}")
+            raise SpaceIdInputError(
+                f"attitude channel: truncation shape expected {self.measured.shape} finite, got {shape.shape}"
+            )
         self._truncation = np.diff(shape, axis=0)
         self._cached = None
         self.n_values = 3 * len(self.measured) - 6 - 3
