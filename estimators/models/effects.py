@@ -378,11 +378,25 @@ class Delay(EffectTerm):
         return {"delay_s": float(theta[0])}
 
 
+#: the payload's search range: mass up to this fraction of the robot's (base full of fuel and arm)
+PAYLOAD_MAX_FRACTION_OF_ROBOT = 1.0
+
+#: the payload's search range: first moments and inertias of an object up to this size, m
+PAYLOAD_SIZE_M = 1.0
+
+#: the masses of the payload's grid of starts, as fractions of the arm's mass
+PAYLOAD_GRID_ARM_FRACTIONS = (0.05, 0.2, 0.5, 1.0, 2.0, 4.0)
+
+
 class Payload(EffectTerm):
     """10 inertial parameters of an object held by the last link (about the last joint's origin, its frame).
 
-    Ranges as :class:`~estimators.parameters.PayloadParameters`: mass ``[0, arm mass]``, first moments and
-    inertia entries for an object up to 0.5 m across.
+    Search range: a mass up to the whole robot's (:data:`PAYLOAD_MAX_FRACTION_OF_ROBOT` of base and arm: the arm may
+    hold a captured satellite as heavy as its own), first moments and inertia entries for an object up to
+    :data:`PAYLOAD_SIZE_M` across (the box of :class:`~estimators.parameters.PayloadParameters` for that mass and
+    size). The typical size, which scales the local fits, is that of an object as heavy as the arm and 0.5 m across
+    (the payload parameterisation's default box). The fit's starts scan masses of :data:`PAYLOAD_GRID_ARM_FRACTIONS`
+    of the arm's mass (:meth:`grid`): one light start does not reach a payload heavier than the arm.
     """
 
     name = "payload"
@@ -391,17 +405,29 @@ class Payload(EffectTerm):
     def __init__(self, robot: Robot) -> None:
         from estimators.parameters import PayloadParameters  # the same ranges as the payload parameterisation
 
-        ranges = PayloadParameters(robot)
+        self.arm_mass_kg = robot.arm_mass_kg()
+        robot_kg = robot.base_full.mass_kg + self.arm_mass_kg
+        ranges = PayloadParameters(robot, payload_max_kg=PAYLOAD_MAX_FRACTION_OF_ROBOT * robot_kg, payload_size_m=PAYLOAD_SIZE_M)
+        typical = PayloadParameters(robot)
         self.names = ranges.names
         self.truth_fields = (("payload_params10", 10),)
-        super().__init__(ranges.nominal, ranges.lower, ranges.upper)
+        super().__init__(ranges.nominal, ranges.lower, ranges.upper, typical.upper - typical.lower)
 
     def starts(self, theta_base: FloatArray | None = None) -> list[FloatArray]:
         """A light compact object at the last joint (a zero mass sits on the bound, where the rest has no effect)."""
+        return [self._compact(0.05 * self.arm_mass_kg)]
+
+    def grid(self, theta_base: FloatArray | None = None) -> list[FloatArray]:
+        """Compact objects at the last joint of :data:`PAYLOAD_GRID_ARM_FRACTIONS` of the arm's mass."""
+        return [self._compact(fraction * self.arm_mass_kg) for fraction in PAYLOAD_GRID_ARM_FRACTIONS]
+
+    @staticmethod
+    def _compact(mass_kg: float) -> FloatArray:
+        """A compact object (radius of gyration 5 cm) of ``mass_kg`` at the last joint's origin (10,)."""
         start = np.zeros(10)
-        start[0] = 0.05 * self.upper[0]
-        start[[4, 6, 9]] = start[0] * 0.05**2
-        return [start]
+        start[0] = mass_kg
+        start[[4, 6, 9]] = mass_kg * 0.05**2
+        return start
 
     def physical(self, theta: FloatArray) -> dict[str, Any]:
         out: dict[str, Any] = {"payload_mass_kg": float(theta[0])}
