@@ -18,6 +18,7 @@ def builtin_estimators() -> dict[str, Callable[..., Estimator]]:
     from estimators.pso import ParticleSwarm
     from estimators.reference import CMAES, DifferentialEvolution, PyswarmsLocalBest
     from estimators.sdp import SemidefiniteLeastSquares
+    from estimators.ukf import UnscentedKalman
 
     return {
         "pso": ParticleSwarm,
@@ -33,4 +34,5 @@ def builtin_estimators() -> dict[str, Callable[..., Estimator]]:
         "sdp": SemidefiniteLeastSquares,
         "abc": ArtificialBeeColony,
         "improved-abc": ImprovedABC,
+        "ukf": UnscentedKalman,
     }
