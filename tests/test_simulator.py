@@ -17,7 +17,7 @@ from scipy.integrate import solve_ivp
 from spaceid_gym.envs import FreeFloatingIDEnv
 from spaceid_gym.physics.fuel import base_after_fuel
 from spaceid_gym.physics.momentum import base_rate_from_joint_motion
-from spaceid_gym.robots import Robot
+from spaceid_gym.robots import Robot, load_robot
 from spaceid_gym.sim.lie import dexp_inv, matrix_from_quat, quat_from_matrix, so3_exp
 from spaceid_gym.sim.servo import default_servo
 from spaceid_gym.sim.simulator import FreeFloatingSimulator, FreeFloatingState
@@ -148,9 +148,9 @@ def test_servo_respects_rate_and_joint_limits(paper6: Robot, period_s: float, ov
     assert np.all(top > paper6.q_upper_rad - 0.1)  # it got there, not stopped far off
 
 
-@pytest.mark.parametrize("name", ["paper6", "quick3"])
+@pytest.mark.parametrize("name", ["paper6", "quick3", "orbit7"])
 def test_required_joint_torques_stay_within_effort_limits(name: str, paper6: Robot, quick3: Robot) -> None:
-    robot = {"paper6": paper6, "quick3": quick3}[name]
+    robot = {"paper6": paper6, "quick3": quick3}.get(name) or load_robot(name)
     sim = FreeFloatingSimulator(robot, robot.base_full)
     data = sim.model.createData()
     rng = np.random.default_rng(5)
