@@ -233,10 +233,11 @@ def fit_attitude_noise(differences: FloatArray, start: AttitudeNoise | None = No
             if best is None or result.fun < best.fun:
                 best = result
         assert best is not None
-        w, r = math.exp(best.x[0]), math.exp(best.x[1])
+        # the point as the likelihood saw it (clamped to the explored range, where the simplex may have wandered)
+        w, r = (math.exp(min(max(v, LOG_STD_LIMITS[0]), LOG_STD_LIMITS[1])) for v in best.x[:2])
         white.append(w if w > MIN_STD_RAD else 0.0)
         walk.append(r if r > MIN_STD_RAD else 0.0)
-        correlation.append(MAX_CORRELATION / (1.0 + math.exp(-best.x[2])))
+        correlation.append(MAX_CORRELATION / (1.0 + math.exp(-min(max(best.x[2], -50.0), 50.0))))
     return AttitudeNoise(tuple(white), tuple(walk), tuple(correlation))  # type: ignore[arg-type]
 
 
