@@ -19,7 +19,7 @@ figure to hold against the paper's Table 1 when the bound lies above it.
 Settings: fuel consumed ``mdf ~ U(initial, usable)`` of :class:`~spaceid_gym.sim.mission.FuelSchedule`
 (5-25 % of the wet base mass, 27.5-137.5 kg for ``paper6``), tank position uniform in its box
 (+-0.40 m per axis for ``paper6``, from the full-tank CoM); a 60 s window at 50 Hz; excitation
-:class:`~agents.excitation.FourierExcitation` seeded per setting; the default
+:class:`~spaceid_gym.excitation.FourierExcitation` seeded per setting; the default
 :class:`~spaceid_gym.sim.sensors.SensorModel` noise.
 
 Equal budgets: with ``budget_reference`` (default ``"improved-pso"``), every other estimator with
@@ -43,7 +43,9 @@ from numpy.typing import NDArray
 from estimators.base import Estimator
 from estimators.problem import IdentificationModel, IdentificationProblem
 from estimators.registry import make_estimator
+from spaceid_gym.datasets import simulate_episode
 from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.excitation import FourierExcitation
 from spaceid_gym.log import write_csv_atomic, write_text_atomic
 from spaceid_gym.robots import Robot, load_robot
 from spaceid_gym.sim.mission import FuelSchedule
@@ -140,9 +142,6 @@ class _Job:
 
 def evaluate_setting(job: _Job) -> list[dict[str, Any]]:
     """Simulate one setting's window and fit every estimator on it; one row per estimator."""
-    from agents.excitation import FourierExcitation
-    from spaceid_gym.datasets import simulate_episode
-
     robot = load_robot(job.robot_spec)
     s = job.setting
     theta_true = np.array([s.fuel_consumed_kg, *s.tank_position_m])

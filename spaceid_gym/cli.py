@@ -24,6 +24,7 @@ from spaceid_gym.arm.cli_commands import (
     add_arm_simulate_arguments,
 )
 from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.excitation import FourierExcitation
 from spaceid_gym.limits import check_count, check_log_size, max_jobs
 from spaceid_gym.sim.sensors import ARCSEC_RAD, ATTITUDE_SOURCES, SensorModel
 from spaceid_gym.variations import AXIS_VALUES
@@ -251,7 +252,6 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _simulate(args: argparse.Namespace) -> None:
-    from agents.excitation import FourierExcitation
     from spaceid_gym.datasets import simulate_episode, write_episode_dataset
     from spaceid_gym.robots import load_robot
     from spaceid_gym.sim.mission import FuelSchedule

@@ -23,9 +23,9 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from agents.excitation import FourierExcitation
 from spaceid_gym.datasets import simulate_episode, write_episode_dataset
 from spaceid_gym.envs.render import RobotRenderer, base_half_extents_from_inertia
+from spaceid_gym.excitation import FourierExcitation
 from spaceid_gym.log import Dataset, MeasurementLog
 from spaceid_gym.physics.inertia import RigidBodyInertia
 from spaceid_gym.physics.momentum import base_rate_from_joint_motion

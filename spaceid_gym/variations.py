@@ -15,8 +15,8 @@ attitude        ``none``, ``star_tracker_1arcsec``, ``star_tracker_5arcsec``, ``
                 :class:`~spaceid_gym.sim.sensors.SensorModel` ``attitude_source``
 noise_scale     log-uniform in [0.3, 3]: the factor on every sensor noise
 excitation      ``diagnostic`` (the multi-sine of :data:`DIAGNOSTIC_EXCITATION`, 0.05-0.5 Hz), ``evaluation``
-                (:class:`~agents.excitation.FourierExcitation`'s defaults, 0.025-0.125 Hz), ``smooth_random``
-                (:class:`~agents.excitation.SmoothRandomExcitation`)
+                (:class:`~spaceid_gym.excitation.FourierExcitation`'s defaults, 0.025-0.125 Hz), ``smooth_random``
+                (:class:`~spaceid_gym.excitation.SmoothRandomExcitation`)
 size_factor     log-uniform in [0.3, 3]: the hidden effect's size over its catalogue default
                 (:data:`~spaceid_gym.effects.DEFAULT_MAGNITUDES`; slosh: the mass over 30 % of the liquid left,
                 capped at the liquid left); ``None`` for a clean log
@@ -46,7 +46,6 @@ from typing import Any
 
 import numpy as np
 
-from agents.excitation import FourierExcitation, SmoothRandomExcitation
 from spaceid_gym.datasets import Excitation, simulate_episode
 from spaceid_gym.effects import (
     DEFAULT_MAGNITUDES,
@@ -60,6 +59,7 @@ from spaceid_gym.effects import (
 )
 from spaceid_gym.envs.free_floating import FreeFloatingIDEnv
 from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.excitation import FourierExcitation, SmoothRandomExcitation
 from spaceid_gym.robots import load_robot
 from spaceid_gym.sim.mission import FuelSchedule
 from spaceid_gym.sim.sensors import ARCSEC_RAD, SensorModel

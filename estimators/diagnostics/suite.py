@@ -33,7 +33,6 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from agents.excitation import FourierExcitation
 from estimators.diagnostics.diagnose import NO_MISSING_EFFECT, diagnose
 from estimators.diagnostics.power import expected_power
 from estimators.diagnostics.workflow import ParameterErrors, apply_effect, parameter_errors
@@ -43,6 +42,7 @@ from spaceid_gym.datasets import simulate_episode
 from spaceid_gym.effects import MAGNITUDE_UNITS, HiddenEffects, draw_effect
 from spaceid_gym.envs.free_floating import FreeFloatingIDEnv
 from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.excitation import FourierExcitation
 from spaceid_gym.log import write_csv_atomic, write_json_atomic, write_text_atomic
 from spaceid_gym.robots import Robot, load_robot
 from spaceid_gym.variations import (
@@ -57,7 +57,7 @@ from spaceid_gym.variations import (
 )
 from spaceid_gym.variations import DIAGNOSTIC_EXCITATION as VARIATION_DIAGNOSTIC_EXCITATION
 
-#: options of :class:`~agents.excitation.FourierExcitation` for the suite (see the module docstring); defined with the
+#: options of :class:`~spaceid_gym.excitation.FourierExcitation` for the suite (see the module docstring); defined with the
 #: variation matrix's excitations, whose ``diagnostic`` value it is
 DIAGNOSTIC_EXCITATION: dict[str, Any] = VARIATION_DIAGNOSTIC_EXCITATION
 

@@ -65,7 +65,7 @@ class ManipulatorIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     ``Box(-1, 1, (n,), float32)``, held for one control period, with ``action_mode``:
 
     * ``"rate"`` (default, the convention of ``FreeFloatingID-v0``, so
-      :class:`agents.excitation.FourierExcitation` drives both envs): joint-rate commands
+      :class:`spaceid_gym.excitation.FourierExcitation` drives both envs): joint-rate commands
       normalised by each joint's rate limit, followed by an acceleration-limited rate servo: the
       reference accelerates towards the commanded rate at most at the acceleration limit;
     * ``"acceleration"``: joint-acceleration commands normalised by each joint's acceleration limit.
