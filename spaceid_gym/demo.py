@@ -9,8 +9,12 @@
 3. Identify the fuel state (mdf, tank position) from the reloaded log with the default estimator
    (``hybrid``: improved PSO, then Levenberg-Marquardt), write ``run1/estimate.json`` and compare it
    with ``truth.json`` key by key, in units of the estimate's own Cramér-Rao standard deviation.
-4. Compare excitations by the Cramér-Rao bound they leave on the fuel parameters.
-5. Save an overlay plot, a rendered frame and ``summary.json``.
+4. The user's loop on a second window that hides a physical effect the paper's model leaves out (a residual
+   system angular momentum): compare the model with the measurements, diagnose which effect is missing, add it and
+   watch the residual fall to the noise and the fuel estimate come back within its Cramér-Rao bound; the whole of
+   it as one HTML page (``loop-report.html``).
+5. Compare excitations by the Cramér-Rao bound they leave on the fuel parameters.
+6. Save an overlay plot, a rendered frame and ``summary.json``.
 """
 
 from __future__ import annotations
@@ -23,7 +27,11 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from estimators.diagnostics.suite import DIAGNOSTIC_EXCITATION
+from estimators.diagnostics.workflow import run_loop, write_report
+from estimators.problem import IdentificationModel
 from spaceid_gym.datasets import simulate_episode, write_episode_dataset
+from spaceid_gym.effects import draw_effect
 from spaceid_gym.envs.render import RobotRenderer, base_half_extents_from_inertia
 from spaceid_gym.excitation import FourierExcitation
 from spaceid_gym.log import Dataset, MeasurementLog
@@ -35,19 +43,20 @@ FUEL_CONSUMED_KG = 40.0
 TANK_POSITION_M = np.array([0.30, -0.10, 0.20])
 DURATION_S = 60.0
 AVERAGE_S = 1.0  # moving-average window that separates structured residuals from white noise
+HIDDEN_EFFECT = "initial_momentum"  # the effect hidden in the loop's window (step 4), at its catalogue size
 
 
 def run_demo(out: Path, robot_name: str = "paper6", seed: int = 3) -> dict[str, Any]:
     """Run the demonstration, write its files under ``out`` and return the summary."""
     out.mkdir(parents=True, exist_ok=True)
     robot = load_robot(robot_name)
-    print(f"[1/5] simulating {DURATION_S:.0f} s of {robot.name} (fuel consumed {FUEL_CONSUMED_KG} kg, tank {TANK_POSITION_M} m)")
+    print(f"[1/6] simulating {DURATION_S:.0f} s of {robot.name} (fuel consumed {FUEL_CONSUMED_KG} kg, tank {TANK_POSITION_M} m)")
     env = simulate_episode(robot, DURATION_S, FUEL_CONSUMED_KG, TANK_POSITION_M, FourierExcitation(robot.n_joints, seed), seed)
     dataset = write_episode_dataset(out / "run1", env, {"seed": seed, "excitation": {"kind": "fourier", "seed": seed}})
     assert dataset.truth is not None
     print(f"      wrote {dataset.path}/log.csv, robot.urdf, truth.json ({dataset.log.n_samples} samples)")
 
-    print("[2/5] model vs measurement: base rate predicted from joint motion (eq. 8)")
+    print("[2/6] model vs measurement: base rate predicted from joint motion (eq. 8)")
     comparison = _compare_with_model(dataset.log, dataset.robot_urdf_path.read_text(), dataset.truth)
     sigma = comparison["gyro_noise_std_rad_s"]
     print(
@@ -62,9 +71,11 @@ def run_demo(out: Path, robot_name: str = "paper6", seed: int = 3) -> dict[str, 
         )
     _plot_overlay(out / "overlay.png", dataset.log, comparison.pop("_predictions"), comparison["averaged_noise_std_rad_s"])
 
-    print("[3/5] identification: fuel state from the reloaded log (estimator 'hybrid')")
+    print("[3/6] identification: fuel state from the reloaded log (estimator 'hybrid')")
     identification = _identify(dataset)
-    print("[4/5] excitation: Cramér-Rao bound on the fuel parameters after one window")
+    print(f"[4/6] the loop on a window hiding an effect the model leaves out ({HIDDEN_EFFECT}): compare, diagnose, add")
+    loop = _loop(robot, seed, out / "loop-report.html")
+    print("[5/6] excitation: Cramér-Rao bound on the fuel parameters after one window")
     excitations = {
         "fourier (5 harmonics)": FourierExcitation(robot.n_joints, seed),
         "one joint (joint 2)": _single_joint(robot.n_joints, 1),
@@ -77,7 +88,7 @@ def run_demo(out: Path, robot_name: str = "paper6", seed: int = 3) -> dict[str, 
         information[label] = {"fuel_consumed_std_kg": float(std[0]), "tank_position_std_m": std[1:].tolist()}
         print(f"      {label:22s} std(mdf) {std[0]:8.3f} kg   std(bf) {np.array2string(std[1:], precision=4)} m")
 
-    print("[5/5] rendering the final pose")
+    print("[6/6] rendering the final pose")
     renderer = RobotRenderer(
         env.simulator.model, base_half_extents_from_inertia(robot.base_full.mass_kg, robot.base_full.inertia_com_kgm2)
     )
@@ -87,6 +98,7 @@ def run_demo(out: Path, robot_name: str = "paper6", seed: int = 3) -> dict[str, 
         "dataset": str(dataset.path),
         "comparison": comparison,
         "identification": identification,
+        "loop": loop,
         "cramer_rao": information,
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
@@ -119,6 +131,25 @@ def _identify(dataset: Dataset) -> dict[str, Any]:
             f"true {np.array2string(true, precision=4)} ({np.array2string(in_std, precision=2)} std)"
         )
     return result
+
+
+def _loop(robot: Any, seed: int, report: Path) -> dict[str, Any]:
+    """Simulate a window whose truth hides :data:`HIDDEN_EFFECT`, run compare -> diagnose -> add -> compare on it and
+    write the HTML report; the verdict and the figures before and after."""
+    hidden = draw_effect(HIDDEN_EFFECT, np.random.default_rng(seed), robot, FUEL_CONSUMED_KG)
+    excitation = FourierExcitation(robot.n_joints, seed=seed, **DIAGNOSTIC_EXCITATION)
+    env = simulate_episode(robot, DURATION_S, FUEL_CONSUMED_KG, TANK_POSITION_M, excitation, seed, hidden_effects=hidden)
+    result = run_loop(IdentificationModel(robot, "fuel"), env.measurement_log(), truth=env.truth())
+    for line in result.summary().splitlines():
+        print(f"      {line}")
+    write_report(result, report)
+    print(f"      wrote {report}")
+    return {
+        "hidden": HIDDEN_EFFECT,
+        "verdict": result.diagnosis.verdict,
+        "before_after": result.before_after_rows(),
+        "report": str(report),
+    }
 
 
 def _compare_with_model(log: MeasurementLog, urdf_text: str, truth: dict[str, Any]) -> dict[str, Any]:

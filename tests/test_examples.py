@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -21,9 +22,11 @@ def test_quickstart_runs() -> None:
 
 
 def test_demo_runs(tmp_path: Path) -> None:
-    _run("-m", "spaceid_gym.cli", "demo", "--robot", "quick3", "--out", str(tmp_path))
-    assert {"overlay.png", "frame.png", "summary.json", "run1"} <= {p.name for p in tmp_path.iterdir()}
+    _run("-m", "spaceid_gym.cli", "demo", "--out", str(tmp_path))  # the built-in robot, as `make demo` runs it
+    assert {"overlay.png", "frame.png", "summary.json", "run1", "loop-report.html"} <= {p.name for p in tmp_path.iterdir()}
     assert (tmp_path / "run1" / "estimate.json").is_file()
+    loop = json.loads((tmp_path / "summary.json").read_text())["loop"]
+    assert loop["verdict"] == loop["hidden"]  # the demo's loop names the effect its window hides
 
 
 def test_identify_fuel_runs() -> None:
