@@ -395,7 +395,7 @@ def _require(name: str, value: Any, ok: bool, expected: str) -> None:
 
 
 # ---------------------------------------------------------------------- drawing defaults
-def _unit_vector(rng: np.random.Generator, size: int = 3) -> FloatArray:
+def random_unit_vector(rng: np.random.Generator, size: int = 3) -> FloatArray:
     """A direction uniform on the unit sphere in R^size (normalised standard normal)."""
     v = rng.standard_normal(size)
     return v / np.linalg.norm(v)
@@ -403,7 +403,7 @@ def _unit_vector(rng: np.random.Generator, size: int = 3) -> FloatArray:
 
 def _random_rotation(rng: np.random.Generator) -> FloatArray:
     """A rotation matrix uniform on SO(3) (from a unit quaternion uniform on S^3)."""
-    w, x, y, z = _unit_vector(rng, 4)
+    w, x, y, z = random_unit_vector(rng, 4)
     return np.array(
         [
             [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
@@ -443,17 +443,17 @@ def draw_effect(
         raise SpaceIdInputError(f"hidden effect '{name}': magnitude must be a finite number >= 0, got {magnitude!r}")
     size = DEFAULT_MAGNITUDES[name] if magnitude is None else float(magnitude)
     if name == "initial_momentum":
-        return HiddenEffects(initial_momentum_Nms=size * _unit_vector(rng))
+        return HiddenEffects(initial_momentum_Nms=size * random_unit_vector(rng))
     if name == "gyro_bias":
-        return HiddenEffects(gyro_bias_rad_s=size * _unit_vector(rng))
+        return HiddenEffects(gyro_bias_rad_s=size * random_unit_vector(rng))
     if name == "gyro_scale":
-        return HiddenEffects(gyro_scale_misalignment=size * _unit_vector(rng, 9).reshape(3, 3))
+        return HiddenEffects(gyro_scale_misalignment=size * random_unit_vector(rng, 9).reshape(3, 3))
     if name == "delay":
         return HiddenEffects(delay_s=size)
     if name == "external_torque":
         return HiddenEffects(
-            external_torque_Nm=size * _unit_vector(rng),
-            external_torque_rate_Nm_s=2.0 * ORBITAL_RATE_RAD_S * size * _unit_vector(rng),
+            external_torque_Nm=size * random_unit_vector(rng),
+            external_torque_rate_Nm_s=2.0 * ORBITAL_RATE_RAD_S * size * random_unit_vector(rng),
         )
     if name == "slosh":
         return draw_slosh(rng, robot, fuel_consumed_kg, None if magnitude is None else size)
@@ -463,7 +463,7 @@ def draw_effect(
     a, b, c = PAYLOAD_BOX_M
     box = size / 12.0 * np.diag([b * b + c * c, a * a + c * c, a * a + b * b])
     rot = _random_rotation(rng)
-    com = PAYLOAD_DISTANCE_M * _unit_vector(rng)
+    com = PAYLOAD_DISTANCE_M * random_unit_vector(rng)
     return HiddenEffects(payload_params10=RigidBodyInertia(size, com, rot @ box @ rot.T).to_params10())
 
 

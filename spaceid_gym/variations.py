@@ -24,6 +24,10 @@ slosh_model     ``spring``, ``pendulum`` (slosh logs only, else ``None``)
 slosh_period_s  log-uniform over :data:`~spaceid_gym.effects.SLOSH_PERIOD_RANGE_S` (2-50 s; slosh logs only)
 ==============  ==========================================================================================
 
+A pendulum's rod points anywhere (uniform on the sphere, base frame: the settling acceleration of a real tank is
+along a thruster's axis, which need not be a base axis) and is 0.1-1 m long (log-uniform), both drawn from the
+effect's generator (they are the effect's geometry, as the other effects' directions are).
+
 The fuel state is drawn as in the evaluation harness (``estimators.evaluation.draw_settings``, which this lower
 layer does not import): fuel consumed uniform between :class:`~spaceid_gym.sim.mission.FuelSchedule`'s
 ``initial_fraction`` and ``usable_fraction`` of the robot's full-tank base mass, tank position uniform in its box;
@@ -55,6 +59,7 @@ from spaceid_gym.effects import (
     HiddenEffects,
     draw_effect,
     draw_slosh,
+    random_unit_vector,
     remaining_liquid_kg,
 )
 from spaceid_gym.envs.free_floating import FreeFloatingIDEnv
@@ -77,6 +82,9 @@ DIAGNOSTIC_EXCITATION: dict[str, float | int] = {"base_frequency_hz": 0.05, "n_h
 
 #: the star tracker's noise of the ``star_tracker_*`` attitude values, arcsec per axis
 STAR_TRACKER_ARCSEC: dict[str, float] = {"star_tracker_1arcsec": 1.0, "star_tracker_5arcsec": 5.0, "star_tracker_20arcsec": 20.0}
+
+#: the pendulum's rod length range, natural logs of metres (drawn log-uniformly)
+PENDULUM_LOG_LENGTH_M = (math.log(0.1), math.log(1.0))
 
 #: the drawn values of each discrete axis, in the order of the tables
 AXIS_VALUES: dict[str, tuple[Any, ...]] = {
@@ -276,7 +284,13 @@ def draw_variation(effect: str, seed: int, fixed: Mapping[str, Any] | None = Non
     if effect == "slosh":
         liquid_kg = float(remaining_liquid_kg(robot, fuel_kg))
         magnitude = min(drawn["size_factor"] * DEFAULT_MAGNITUDES["slosh"] * liquid_kg, liquid_kg)
-        hidden = draw_slosh(effect_rng, robot, fuel_kg, magnitude, drawn["slosh_model"], drawn["slosh_period_s"])
+        pendulum = {}
+        if drawn["slosh_model"] == "pendulum":  # the rod: any direction, 0.1-1 m (drawn only here: nothing else moves)
+            pendulum = {
+                "axis_base": tuple(random_unit_vector(effect_rng)),
+                "length_m": math.exp(effect_rng.uniform(*PENDULUM_LOG_LENGTH_M)),
+            }
+        hidden = draw_slosh(effect_rng, robot, fuel_kg, magnitude, drawn["slosh_model"], drawn["slosh_period_s"], **pendulum)
     elif effect != NO_EFFECT:
         magnitude = drawn["size_factor"] * DEFAULT_MAGNITUDES[effect]
         hidden = draw_effect(effect, effect_rng, robot, fuel_kg, magnitude)

@@ -56,6 +56,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -70,7 +71,7 @@ from estimators.diagnostics.residuals import ResidualAnalysis, analyse_residuals
 from estimators.estimate import Estimate
 from estimators.least_squares import LevenbergMarquardt, interior_start
 from estimators.models.attitude_channel import AttitudeChannel, AttitudeNoise
-from estimators.models.effects import EFFECT_TERMS
+from estimators.models.effects import EFFECT_TERMS, Slosh
 from estimators.parameters import WithEffects
 from estimators.problem import IdentificationModel, IdentificationProblem
 from spaceid_gym.errors import SpaceIdInputError
@@ -80,6 +81,9 @@ FloatArray = NDArray[np.float64]
 
 #: the candidates tried by default: the whole catalogue
 DEFAULT_CANDIDATES: tuple[str, ...] = tuple(EFFECT_TERMS)
+
+#: effects with several equivalent models, each fitted (:func:`_fit_candidate`): the specs of each
+CANDIDATE_VARIANTS: dict[str, tuple[str, ...]] = {"slosh": ("slosh", "slosh[model=pendulum]")}
 
 #: a candidate is named only if it explains at least this fraction of the baseline's excess over the noise
 EXPLAINED_FRACTION = 0.3
@@ -189,6 +193,11 @@ class ModelFit(CandidateScores):
     @property
     def plausible(self) -> bool:
         return not self.implausible
+
+    @property
+    def spec(self) -> str:
+        """The candidate's effect with its options as the model has it (``"slosh[model=pendulum]"``; :data:`CANDIDATE_VARIANTS`)."""
+        return next(s for s in reversed(self.effects) if s.partition("[")[0] == self.effect)
 
     @property
     def nameable(self) -> bool:
@@ -554,32 +563,56 @@ def _diagnose(
             weights = ChannelWeights(sigma0, baseline.attitude_noise)
         # the baseline's own error model weights every candidate's fit and is the reference of the log-determinants
         baseline.attitude_chi2 = channel.chi2(baseline.theta, weights.attitude)
-    fits = []
+    fits, variants_tried = [], 0
+    n_values = baseline.n_residuals + baseline.n_attitude_values
     for name in names:
-        extended = candidate_model(model, name)
-        params = extended.parameters
-        assert isinstance(params, WithEffects)
-        term = params.terms[-1]
-        # from the baseline fit, and once from the default start (a missing effect can drag the baseline far off)
-        restart = interior_start(params)[: len(baseline.theta)]
-        k_base = params.base.n_params
-        problem = extended.problem(log)
-        grid = [np.concatenate((baseline.theta, s)) for s in term.grid(baseline.theta[:k_base])]
-        starts = best_of_grid(problem, grid, None if channel is None else AttitudeChannel.of(extended, log), weights)
-        starts.append(np.concatenate((restart, term.starts(restart[:k_base])[0])))
-        starts.append(np.concatenate((baseline.theta, term.nominal)))  # the baseline itself: the nested model's fit
-        fits.append(fit_model(extended, log, starts=starts, effect=name, weights=weights, problem=problem, profile_noise=True)[0])
+        # an effect with several equivalent models (slosh: spring-mass or pendulum) is fitted with each; the one of
+        # lowest BIC (at the baseline's gyro noise) stands for the effect, and the extra fits count in the Bonferroni
+        variants: list[ModelFit] = []
+        for spec in CANDIDATE_VARIANTS.get(name, (name,)):
+            variants.append(_fit_candidate(model, log, spec, baseline, weights, channel, variants))
+        variants_tried += len(variants) - 1
+        fits.append(min(variants, key=lambda f: _chi2(f, sigma0 * sigma0) + f.n_params * math.log(n_values)))
     gyro_residual = model.problem(log).residuals(baseline.theta, count=False).reshape(-1, 3)
-    sigma = _score(baseline, fits, alpha, difference_noise_std(gyro_residual))
+    sigma = _score(baseline, fits, alpha, difference_noise_std(gyro_residual), extra_tests=variants_tried)
     combined = _fit_challengers(model, log, baseline, fits, alpha, weights, sigma)
     for fit in fits:
         if fit.nameable:
-            analysed = _analyse_fit(candidate_model(model, str(fit.effect)), log, fit.theta, sigma)
+            analysed = _analyse_fit(candidate_model(model, fit.spec), log, fit.theta, sigma)
             fit.residual_consistent = analysed.consistent_with_noise
     analysis = _analyse_fit(model, log, baseline.theta, sigma)
     verdict, reason = _verdict(baseline, fits, analysis, alpha, combined)
     fits.sort(key=lambda f: (f.effect != verdict, f.bic))
     return Diagnosis(verdict, baseline, fits, analysis, sigma, alpha, reason, weights, combined=combined)
+
+
+def _fit_candidate(
+    model: IdentificationModel,
+    log: MeasurementLog,
+    spec: str,
+    baseline: ModelFit,
+    weights: ChannelWeights | None,
+    channel: AttitudeChannel | None,
+    other_variants: Sequence[ModelFit] = (),
+) -> ModelFit:
+    """``model`` with the effect ``spec`` added, fitted from the baseline's fit, from the best of the term's grid and
+    once from the default start (a missing effect can drag the baseline far off). The grid includes, for a slosh
+    pendulum, the fits of the ``other_variants`` (the spring-mass) with the rod along each of a finer set of axes."""
+    extended = candidate_model(model, spec)
+    params = extended.parameters
+    assert isinstance(params, WithEffects)
+    term = params.terms[-1]
+    restart = interior_start(params)[: len(baseline.theta)]
+    k_base = params.base.n_params
+    problem = extended.problem(log)
+    grid = [np.concatenate((baseline.theta, s)) for s in term.grid(baseline.theta[:k_base])]
+    if isinstance(term, Slosh):
+        n0 = len(baseline.theta)  # the model's own unknowns (base and effects already in it), then the candidate's
+        grid += [np.concatenate((v.theta[:n0], s)) for v in other_variants for s in term.axis_grid(v.theta[n0:])]
+    starts = best_of_grid(problem, grid, None if channel is None else AttitudeChannel.of(extended, log), weights)
+    starts.append(np.concatenate((restart, term.starts(restart[:k_base])[0])))
+    starts.append(np.concatenate((baseline.theta, term.nominal)))  # the baseline itself: the nested model's fit
+    return fit_model(extended, log, starts=starts, effect=term.name, weights=weights, problem=problem, profile_noise=True)[0]
 
 
 def attitude_gyro_dependence(differences: FloatArray, gyro_residual: FloatArray, dt_s: FloatArray) -> tuple[float, float]:
@@ -659,7 +692,7 @@ def _fit_challengers(
     k0 = baseline.n_params
     combined = []
     for challenger in _challengers(leader, named):
-        both = candidate_model(candidate_model(model, str(leader.effect)), str(challenger.effect))
+        both = candidate_model(candidate_model(model, leader.spec), challenger.spec)
         params = both.parameters
         assert isinstance(params, WithEffects)
         leader_off, challenger_off = (term.nominal for term in params.terms[-2:])
@@ -686,7 +719,7 @@ def difference_noise_std(residual: FloatArray) -> float:
     return float(np.sqrt(np.mean(steps * steps) / 2.0))
 
 
-def _score(baseline: ModelFit, fits: list[ModelFit], alpha: float, white_std: float | None = None) -> float:
+def _score(baseline: ModelFit, fits: list[ModelFit], alpha: float, white_std: float | None = None, extra_tests: int = 0) -> float:
     """Fill in the scores of every fit; returns the gyro noise std used (rad/s).
 
     The likelihood-ratio tests scale the gyro's chi-square by the best fit's residual variance; the explained
@@ -709,7 +742,7 @@ def _score(baseline: ModelFit, fits: list[ModelFit], alpha: float, white_std: fl
         k = f.n_params - baseline.n_params
         f.lr_statistic = baseline.chi2 - f.chi2
         f.p_value = float(chi2.sf(max(f.lr_statistic, 0.0), k))
-        f.significant = f.p_value < alpha / max(len(fits), 1)
+        f.significant = f.p_value < alpha / max(len(fits) + extra_tests, 1)
         f.explained_fraction = explained_fraction(_chi2(baseline, white2) - _chi2(f, white2), excess)
     return math.sqrt(sigma2)
 

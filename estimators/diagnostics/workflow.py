@@ -46,8 +46,8 @@ def apply_effect(
     """
     from estimators.registry import make_estimator
 
-    extended = candidate_model(model, effect)
     fit = None if diagnosis is None else diagnosis.fit_of(effect)
+    extended = candidate_model(model, effect if fit is None else fit.spec)  # the variant the diagnosis chose (slosh)
     if fit is None:
         return extended, (estimator or make_estimator("hybrid")).fit(extended, log)
     problem = extended.problem(log)

@@ -13,9 +13,9 @@ search range) and acts in one of three places of the prediction:
     expressed in the base frame at the log's first sample, so ``L_body(t) = R_rel(t)^T l0``;
   - ``external_torque``: ``L(t) = l0 + tau t`` (+ ``tau_rate t^2 / 2`` with ``drift=True``), the
     momentum is not conserved (thruster leak, gravity gradient); frames as for ``initial_momentum``;
-  - ``slosh``: a point mass ``m_s`` on an isotropic spring-damper (``f``, ``zeta``) at the tank,
-    driven by the tank's inertial acceleration; its momentum relative to the base is taken from the
-    rigid bodies (see :class:`Slosh`);
+  - ``slosh``: a point mass ``m_s`` on an isotropic spring-damper (``f``, ``zeta``) at the tank, or on a
+    pendulum whose rod direction is fitted (``slosh[model=pendulum]``), driven by the tank's inertial
+    acceleration; its momentum relative to the base is taken from the rigid bodies (see :class:`Slosh`);
 
 * **measurement** — the gyro does not read the base rate at the encoders' sample time:
   ``omega_meas(t) = (I + E) omega(t - d) + b`` with ``delay`` ``d``, ``gyro_scale`` ``E`` (scale factors on
@@ -52,7 +52,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from estimators.models.fractional_delay import delay_samples
-from spaceid_gym.effects import remaining_liquid_kg
+from spaceid_gym.effects import SLOSH_MODELS, remaining_liquid_kg
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.log import MeasurementLog
 from spaceid_gym.physics.inertia import RigidBodyInertia, skew, spatial_inertia_matrix
@@ -488,6 +488,14 @@ class Slosh(EffectTerm):
     with the arm's configuration, and the slosh's feedback on its own forcing beyond ``Lambda^-1``.
     Integrated with RK4 at the log's sample period, starting at rest.
 
+    Two equivalent mechanical models (Abramson, NASA SP-106, ch. 6), ``model=``: ``"spring"`` (the default; the mass
+    moves in every direction) and ``"pendulum"`` (``slosh[model=pendulum]``: a mass on a rod whose direction, two more
+    unknowns ``slosh_axis_azimuth_rad`` and ``slosh_axis_elevation_rad`` (base frame), is fitted; in the small-angle
+    limit the rod carries the mass with the base along it and the mass moves only normal to it, so the oscillator and
+    its forcing are projected on that plane, :meth:`projector`). Their lateral dynamics are the same; they differ in
+    what the motion along the rod does. :func:`~estimators.diagnostics.diagnose.diagnose` fits both and names
+    ``slosh`` with the better.
+
     Ranges: ``m_s`` in ``[0, usable fuel]``, ``f`` in ``[0.02, 2]`` Hz (periods 0.5-50 s: the first lateral mode of
     tanks from 0.1 m to several metres, whichever equivalent model, pendulum or spring-mass, describes it),
     ``zeta`` in ``[0.001, 1]``; nominal ``m_s = 0`` (off). The cost is multimodal in the frequency: :meth:`grid`
@@ -507,23 +515,72 @@ class Slosh(EffectTerm):
     #: the scan of :meth:`grid`: frequencies (Hz, log-spaced over the search range) and sloshing fractions of the liquid
     GRID_FREQUENCIES_HZ = tuple(float(f) for f in np.geomspace(0.02, 2.0, 19))
     GRID_MASS_FRACTIONS = (0.05, 0.2, 0.5)
+    #: the pendulum's rod directions of the scan (azimuth, elevation; rad): the base's z, x and y axes and the four
+    #: diagonals of its octants (a direction and its opposite are one rod)
+    GRID_AXES = (
+        (0.0, 0.5 * math.pi),
+        (0.0, 0.0),
+        (0.5 * math.pi, 0.0),
+        *((az, math.atan(1.0 / math.sqrt(2.0))) for az in (0.25 * math.pi, 0.75 * math.pi, -0.75 * math.pi, -0.25 * math.pi)),
+    )
+    #: the finer set of :meth:`axis_grid`: those seven and the six diagonals of the base's faces
+    FINE_AXES = (
+        *GRID_AXES,
+        *((az, 0.0) for az in (0.25 * math.pi, -0.25 * math.pi)),
+        *((az, el) for az in (0.0, 0.5 * math.pi) for el in (0.25 * math.pi, -0.25 * math.pi)),
+    )
 
     def __init__(
         self,
         robot: Robot,
         tank_of: Callable[[FloatArray], FloatArray] | None = None,
         liquid_of: Callable[[FloatArray], FloatArray] | None = None,
+        model: str = "spring",
     ) -> None:
+        if model not in SLOSH_MODELS:
+            raise SpaceIdInputError(f"effects: slosh model {model!r} unknown; expected one of {', '.join(SLOSH_MODELS)}")
+        self.model = model
         liquid_max_kg = float(remaining_liquid_kg(robot, 0.0))  # the usable fuel, as the simulator has it
-        super().__init__(
-            np.array([0.0, 0.3, 0.05]),
-            np.array([0.0, 0.02, 0.001]),
-            np.array([liquid_max_kg, 2.0, 1.0]),
-            np.array([0.1 * liquid_max_kg, 0.3, 0.1]),
-        )
+        nominal, lower = [0.0, 0.3, 0.05], [0.0, 0.02, 0.001]
+        upper, scale = [liquid_max_kg, 2.0, 1.0], [0.1 * liquid_max_kg, 0.3, 0.1]
+        if model == "pendulum":
+            # the rod's direction: periodic angles, searched over two turns so that no fit stops on a wall
+            self.names = (*Slosh.names, "slosh_axis_azimuth_rad", "slosh_axis_elevation_rad")
+            self.truth_fields = (*Slosh.truth_fields, ("slosh_axis", 3))
+            nominal, lower = [*nominal, 0.0, 0.5 * math.pi], [*lower, -2.0 * math.pi, -math.pi]
+            upper, scale = [*upper, 2.0 * math.pi, math.pi], [*scale, 0.5, 0.5]
+        super().__init__(np.array(nominal), np.array(lower), np.array(upper), np.array(scale))
         full_com = np.asarray(robot.base_full.com_m, dtype=float)
         self.tank_of = tank_of if tank_of is not None else (lambda theta_base: np.broadcast_to(full_com, (len(theta_base), 3)))
         self.liquid_of = liquid_of if liquid_of is not None else (lambda theta_base: np.full(len(theta_base), liquid_max_kg))
+
+    @property
+    def spec(self) -> str:
+        return self.name if self.model == "spring" else f"{self.name}[model={self.model}]"
+
+    def from_truth(self, hidden: Mapping[str, Any]) -> FloatArray:
+        """As :meth:`EffectTerm.from_truth`; the pendulum's axis (a unit vector in the truth) as its two angles, and a
+        spring truth read by the pendulum term with the rod along the nominal axis (and vice versa, the axis dropped)."""
+        theta = self.nominal.copy()
+        for i, field in enumerate(Slosh.names):
+            if field in hidden:
+                theta[i] = float(hidden[field])
+        if self.model == "pendulum" and hidden.get("slosh_axis") is not None:
+            axis = np.ravel(np.asarray(hidden["slosh_axis"], dtype=float))
+            if axis.size != 3 or not np.linalg.norm(axis) > 0.0:
+                raise SpaceIdInputError(f"hidden_effects: slosh_axis expected a non-zero 3-vector, got {hidden['slosh_axis']!r}")
+            axis = axis / np.linalg.norm(axis)
+            theta[3:5] = math.atan2(axis[1], axis[0]), math.asin(float(np.clip(axis[2], -1.0, 1.0)))
+        return theta
+
+    def projector(self, theta: FloatArray) -> FloatArray:
+        """(P, 3, 3): where the slosh mass can move, base axes: everywhere for the spring, the plane normal to the
+        rod ``a = [cos el cos az, cos el sin az, sin el]`` for the pendulum (``E - a a^T``: the small-angle limit, in which
+        the rod moves the mass with the base along ``a``)."""
+        if self.model == "spring":
+            return np.broadcast_to(np.eye(3), (len(theta), 3, 3)).copy()
+        axis = rod_axis(theta[:, 3], theta[:, 4])
+        return np.eye(3) - axis[:, :, None] * axis[:, None, :]
 
     def moving_part(self, theta: FloatArray, theta_base: FloatArray) -> FloatArray:
         """``theta`` (P, 3) with the slosh mass limited to the liquid left in the tank for ``theta_base`` (P, k_base)."""
@@ -538,13 +595,27 @@ class Slosh(EffectTerm):
         mass = 0.1 * self.upper[0]
         if theta_base is not None:
             mass = min(mass, 0.5 * float(self.liquid_of(np.atleast_2d(theta_base))[0]))
-        return [np.array([mass, f, 0.05]) for f in self.START_FREQUENCIES_HZ]
+        return [np.array([mass, f, 0.05, *self.GRID_AXES[0]][: self.n_params]) for f in self.START_FREQUENCIES_HZ]
 
     def grid(self, theta_base: FloatArray | None = None) -> list[FloatArray]:
         """:data:`GRID_FREQUENCIES_HZ` x :data:`GRID_MASS_FRACTIONS` of the liquid left for ``theta_base`` (or of the
         usable fuel), damping 0.05: candidates to score in one batched evaluation before the local fits."""
         liquid = self.upper[0] if theta_base is None else float(self.liquid_of(np.atleast_2d(theta_base))[0])
-        return [np.array([fraction * liquid, f, 0.05]) for f in self.GRID_FREQUENCIES_HZ for fraction in self.GRID_MASS_FRACTIONS]
+        axes = self.GRID_AXES if self.model == "pendulum" else ((),)
+        return [
+            np.array([fraction * liquid, f, 0.05, *axis])
+            for f in self.GRID_FREQUENCIES_HZ
+            for fraction in self.GRID_MASS_FRACTIONS
+            for axis in axes
+        ]
+
+    def axis_grid(self, fitted: FloatArray) -> list[FloatArray]:
+        """The pendulum's candidates (5,) with the mass, frequency and damping of ``fitted`` (the first three values: a
+        fit of the other slosh model, whose lateral dynamics are the same) and the rod along each of
+        :data:`FINE_AXES`; none for the spring."""
+        if self.model != "pendulum":
+            return []
+        return [np.array([*np.asarray(fitted, dtype=float)[:3], *axis]) for axis in self.FINE_AXES]
 
     def momentum(
         self, twist: FloatArray, theta: FloatArray, tank_m: FloatArray, composite10: FloatArray, context: EffectContext
@@ -558,6 +629,7 @@ class Slosh(EffectTerm):
         omega_n = 2.0 * np.pi * theta[:, 1]
         rest = composite10 - _point_mass10(theta[:, 0], tank_m)
         coupling = np.eye(3) + theta[:, 0, None, None] * _inverse_mass_at(rest, tank_m)  # m_s A, finite at m_s = 0
+        projector = self.projector(theta)
         return _slosh_momentum(
             np.ascontiguousarray(twist),
             context.t_s,
@@ -565,11 +637,20 @@ class Slosh(EffectTerm):
             theta[:, 0],
             omega_n,
             theta[:, 2],
-            np.ascontiguousarray(coupling),
+            np.ascontiguousarray(projector @ coupling),
+            np.ascontiguousarray(projector),
         )
 
     def physical(self, theta: FloatArray) -> dict[str, Any]:
-        return {"slosh_mass_kg": float(theta[0]), "slosh_frequency_hz": float(theta[1]), "slosh_damping_ratio": float(theta[2])}
+        out: dict[str, Any] = {
+            "slosh_mass_kg": float(theta[0]),
+            "slosh_frequency_hz": float(theta[1]),
+            "slosh_damping_ratio": float(theta[2]),
+        }
+        if self.model == "pendulum":
+            out["slosh_model"] = self.model
+            out["slosh_axis"] = rod_axis(theta[3:4], theta[4:5])[0].tolist()
+        return out
 
     def implausible(
         self, theta: FloatArray, covariance: FloatArray | None = None, theta_base: FloatArray | None = None
@@ -582,6 +663,12 @@ class Slosh(EffectTerm):
             if theta[0] > liquid + 1e-6 * self.upper[0]:  # not for a fit on the cap by rounding
                 reasons.append(f"slosh mass {theta[0]:.4g} kg exceeds the {liquid:.4g} kg of liquid left in the tank")
         return reasons
+
+
+def rod_axis(azimuth_rad: FloatArray, elevation_rad: FloatArray) -> FloatArray:
+    """Unit vectors (P, 3), base axes: ``[cos el cos az, cos el sin az, sin el]`` (the pendulum's rod)."""
+    az, el = np.asarray(azimuth_rad, dtype=float), np.asarray(elevation_rad, dtype=float)
+    return np.stack((np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)), axis=-1)
 
 
 def _point_mass10(mass_kg: FloatArray, position_m: FloatArray) -> FloatArray:
@@ -637,14 +724,19 @@ def _slosh_momentum(
     omega_n: FloatArray,
     zeta: FloatArray,
     coupling: FloatArray,
+    projector: FloatArray,
 ) -> tuple[FloatArray, FloatArray]:
-    """See :meth:`Slosh.momentum`; RK4 with the forcing linear between samples (each axis is the same scalar oscillator)."""
+    """See :meth:`Slosh.momentum`; RK4 with the forcing linear between samples (each axis is the same scalar
+    oscillator). ``coupling`` (P, 3, 3) is ``Pi (E + m_s Lambda^-1)`` and the forcing is ``Pi a_tank``, with ``Pi =
+    projector`` (P, 3, 3) the directions the mass can move in (:meth:`Slosh.projector`): starting at rest, the
+    displacement stays in them."""
     n_p, n_t = twist.shape[0], twist.shape[1]
     out = np.zeros((n_p, n_t, 6))
     moved = np.zeros((n_p, n_t, 10))
     accel = np.empty((n_t, 3))
     # RK4 scratch: the state [x; x'], the point of a stage, the four slopes, the forcing at a step's start/middle/end
     state, stage, slopes, force = np.empty(6), np.empty(6), np.empty((4, 6)), np.empty((3, 3))
+    free = np.empty(3)  # the tank's acceleration before the projection
     for p in range(n_p):
         rx, ry, rz = tank[p, 0], tank[p, 1], tank[p, 2]
         # tank acceleration (base axes) from the twist, derivatives by central differences
@@ -667,7 +759,9 @@ def _slosh_momentum(
             wr = _cross(wx, wy, wz, rx, ry, rz)
             a3 = _cross(wx, wy, wz, wr[0], wr[1], wr[2])
             for c in range(3):
-                accel[k, c] = (twist[p, hi, c] - twist[p, lo, c]) * inv + a1[c] + a2[c] + a3[c]
+                free[c] = (twist[p, hi, c] - twist[p, lo, c]) * inv + a1[c] + a2[c] + a3[c]
+            for c in range(3):
+                accel[k, c] = projector[p, c, 0] * free[0] + projector[p, c, 1] * free[1] + projector[p, c, 2] * free[2]
         # x'' = -A (k x + c x') - a_tank: the spring-damper force F also accelerates the rest of the robot at
         # the tank, by Lambda^-1 F, so the relative motion sees the inverse mass A = E / m_s + Lambda^-1;
         # with k = m_s w^2 and c = 2 zeta m_s w: A (k x + c x') = (E + m_s Lambda^-1) (w^2 x + 2 zeta w x')
@@ -716,6 +810,11 @@ EFFECT_TERMS: dict[str, type[EffectTerm]] = {
 _MEASUREMENT_ORDER = ("delay", "gyro_scale", "gyro_bias")
 
 
+#: the options of :func:`parse_effects`: effect -> (its one option, the values it takes)
+_EFFECT_OPTIONS = {"external_torque": ("drift", ("true", "false")), "slosh": ("model", SLOSH_MODELS)}
+_OPTIONS_TEXT = "external_torque[drift=true|false] and slosh[model=spring|pendulum]"
+
+
 def parse_effects(spec: str | list[str] | tuple[str, ...] | None) -> list[tuple[str, dict[str, Any]]]:
     """``"slosh,external_torque[drift=true]"`` or a list of names -> ``[(name, options), ...]`` (validated, no duplicates)."""
     if spec is None:
@@ -734,12 +833,13 @@ def parse_effects(spec: str | list[str] | tuple[str, ...] | None) -> list[tuple[
             if not rest.endswith("]"):
                 raise SpaceIdInputError(f"effects: expected name[key=value,...], got {item!r}")
             for pair in filter(None, (p.strip() for p in rest[:-1].split(","))):
-                key, eq, value = pair.partition("=")
-                if not eq or key.strip() != "drift" or name != "external_torque":
-                    raise SpaceIdInputError(f"effects: {item!r}: the only option is external_torque[drift=true|false]")
-                if value.strip().lower() not in ("true", "false"):
-                    raise SpaceIdInputError(f"effects: {item!r}: drift must be true or false")
-                options["drift"] = value.strip().lower() == "true"
+                key, eq, value = (part.strip() for part in pair.partition("="))
+                if not eq or key != _EFFECT_OPTIONS.get(name, (None,))[0]:
+                    raise SpaceIdInputError(f"effects: {item!r}: the options are {_OPTIONS_TEXT}")
+                choices = _EFFECT_OPTIONS[name][1]
+                if value.lower() not in choices:
+                    raise SpaceIdInputError(f"effects: {item!r}: {key} must be one of {', '.join(choices)}")
+                options[key] = value.lower() == "true" if key == "drift" else value.lower()
         out.append((name, options))
     return out
 
@@ -769,7 +869,7 @@ def make_terms(
     terms: list[EffectTerm] = []
     for name, options in parse_effects(spec):
         if name == "slosh":
-            terms.append(Slosh(robot, tank_of, liquid_of))
+            terms.append(Slosh(robot, tank_of, liquid_of, **options))
         else:
             terms.append(EFFECT_TERMS[name](robot, **options))  # type: ignore[call-arg]
     return terms
