@@ -10,6 +10,11 @@ the series' discrete Fourier transform by ``exp(-2 pi i f d)``: it moves every f
 every frequency's amplitude, so it cannot lower the noise a series carries (Parseval), and on signals inside the
 band it is the ideal (sinc) band-limited delay.
 
+One exception: at the Nyquist frequency a real series cannot be moved by a fraction of a sample (the bin keeps the
+real part of its phase factor, ``cos(pi lag)``), so near it the ramp loses power after all. ``band`` restricts the
+delay to the content below a frequency, leaving the noise above it where it is (see
+:class:`~estimators.models.effects.Delay`).
+
 Ends: the series is extended by holding its first and last values over more samples than the largest lag (a log
 that starts and ends at rest is unchanged by it), so that the circular transform does not wrap the end onto the
 start; the samples read from before the first are then the first value, as a gyro that lags reads at the start.
@@ -30,11 +35,14 @@ FloatArray = NDArray[np.float64]
 PAD_MARGIN_SAMPLES = 64
 
 
-def delay_samples(x: FloatArray, lag: FloatArray) -> FloatArray:
+def delay_samples(x: FloatArray, lag: FloatArray, band: tuple[float, float] | None = None) -> FloatArray:
     """``x`` (P, T, C) read ``lag[p]`` samples earlier (fractional, any sign: a negative lag reads later), all-pass.
 
+    ``band`` ``(f1, f2)`` (cycles per sample, ``0 < f1 < f2``) delays only the content below ``f1``, none above ``f2``,
+    with a raised-cosine blend between: the phase factor is ``1 + (exp(-2 pi i f lag) - 1) w(f)``.
+
     Raises:
-        ValueError: ``x`` is not (P, T, C) or ``lag`` is not (P,) finite numbers.
+        ValueError: ``x`` is not (P, T, C), ``lag`` is not (P,) finite numbers, or a bad ``band``.
     """
     x = np.asarray(x, dtype=float)
     lag = np.asarray(lag, dtype=float)
@@ -44,5 +52,13 @@ def delay_samples(x: FloatArray, lag: FloatArray) -> FloatArray:
     pad = math.ceil(float(np.max(np.abs(lag), initial=0.0))) + PAD_MARGIN_SAMPLES
     n = next_fast_len(n_t + 2 * pad, real=True)
     extended = np.concatenate((np.repeat(x[:, :1], pad, axis=1), x, np.repeat(x[:, -1:], n - n_t - pad, axis=1)), axis=1)
-    phase = np.exp(-2j * np.pi * rfftfreq(n)[None, :, None] * lag[:, None, None])
+    frequency = rfftfreq(n)
+    phase = np.exp(-2j * np.pi * frequency[None, :, None] * lag[:, None, None])
+    if band is not None:
+        f1, f2 = band
+        if not 0.0 < f1 < f2:
+            raise ValueError(f"delay_samples: expected a band 0 < f1 < f2 (cycles per sample), got {band!r}")
+        blend = np.clip((frequency - f1) / (f2 - f1), 0.0, 1.0)
+        weight = 0.5 * (1.0 + np.cos(np.pi * blend))  # 1 below f1, 0 above f2
+        phase = 1.0 + (phase - 1.0) * weight[None, :, None]
     return irfft(rfft(extended, axis=1) * phase, n=n, axis=1)[:, pad : pad + n_t]
