@@ -144,6 +144,13 @@ def test_slosh_pendulum_term_reads_its_axis_and_takes_its_option(paper6: Robot) 
     theta = term.from_truth({"slosh_mass_kg": 5.0, "slosh_frequency_hz": 0.1, "slosh_damping_ratio": 0.02, "slosh_axis": rod * 2})
     assert theta[:3] == pytest.approx([5.0, 0.1, 0.02])
     assert term.physical(theta)["slosh_axis"] == pytest.approx(rod)
+    log = _noise_free(paper6, HiddenEffects(), duration_s=4.0)
+    model = IdentificationModel(paper6, "fuel", effects="slosh[model=pendulum]")
+    problem = model.problem(log)
+    estimate = problem.make_estimate(
+        np.concatenate((THETA, theta)), estimator="test", options={}, seed=None, cost_history=[0.0], wall_time_s=0.0
+    )
+    assert estimate.to_dict()["slosh_axis"] == pytest.approx(rod)  # an estimate file holds the rod's direction
     projector = term.projector(theta[None, :])[0]
     assert projector @ rod == pytest.approx(np.zeros(3), abs=1e-12)
     assert np.linalg.matrix_rank(projector) == 2

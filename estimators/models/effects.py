@@ -659,8 +659,7 @@ class Slosh(EffectTerm):
             "slosh_frequency_hz": float(theta[1]),
             "slosh_damping_ratio": float(theta[2]),
         }
-        if self.model == "pendulum":
-            out["slosh_model"] = self.model
+        if self.model == "pendulum":  # numbers only (the estimate's std differentiates them); the model is in the spec
             out["slosh_axis"] = rod_axis(theta[3:4], theta[4:5])[0].tolist()
         return out
 
