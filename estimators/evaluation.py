@@ -16,7 +16,7 @@ the RMS Cramér-Rao standard deviation (bound at the true parameters with the tr
 efficient unbiased estimator would have (``sqrt(2/pi)`` times the bound, in the same units), the
 figure to hold against the paper's Table 1 when the bound lies above it.
 
-Settings: fuel consumed ``mdf ~ U(initial, usable)`` of :class:`~spaceid_gym.sim.mission.FuelSchedule`
+Settings: fuel consumed ``mdf ~ U(initial, usable)`` of :class:`~spaceid_gym.mission.FuelSchedule`
 (5-25 % of the wet base mass, 27.5-137.5 kg for ``paper6``), tank position uniform in its box
 (+-0.40 m per axis for ``paper6``, from the full-tank CoM); a 60 s window at 50 Hz; excitation
 :class:`~spaceid_gym.excitation.FourierExcitation` seeded per setting; the default
@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from tqdm import tqdm
 
 from estimators.base import Estimator
 from estimators.problem import IdentificationModel, IdentificationProblem
@@ -47,8 +48,8 @@ from spaceid_gym.datasets import simulate_episode
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.excitation import FourierExcitation
 from spaceid_gym.log import write_csv_atomic, write_text_atomic
+from spaceid_gym.mission import FuelSchedule
 from spaceid_gym.robots import Robot, load_robot
-from spaceid_gym.sim.mission import FuelSchedule
 
 FloatArray = NDArray[np.float64]
 
@@ -235,8 +236,6 @@ def run_evaluation(
     progress: bool = True,
 ) -> list[dict[str, Any]]:
     """Rows (one per setting and estimator) of :func:`evaluate_setting` over ``settings``, with a progress bar."""
-    from tqdm import tqdm
-
     for spec in specs:
         estimator_from_spec(spec)  # bad names and options fail before any simulation
     load_robot(robot)

@@ -116,9 +116,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.mission import FuelSchedule
 from spaceid_gym.physics.inertia import RigidBodyInertia
 from spaceid_gym.robots.robot import Robot
-from spaceid_gym.sim.mission import FuelSchedule
 
 FloatArray = NDArray[np.float64]
 

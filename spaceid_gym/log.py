@@ -35,6 +35,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.robots import load_robot
 
 FloatArray = NDArray[np.float64]
 PathLike = str | os.PathLike[str]
@@ -141,7 +142,7 @@ def _check_arrays(
 class JointTimeSeries:
     """What every log of joint measurements has: sample times ``t_s`` (T,) and joint angles ``q_rad`` (T, n).
 
-    Shared by :class:`MeasurementLog` and :class:`spaceid_gym.arm.log.ArmLog` (frozen dataclasses).
+    Shared by :class:`MeasurementLog` and :class:`spaceid_gym.arm.joint_log.ArmLog` (frozen dataclasses).
     """
 
     t_s: FloatArray
@@ -610,8 +611,6 @@ def load_dataset(directory: PathLike, n_joints: int | None = None) -> Dataset:
                 f"{directory / name}: file not found; a dataset folder needs {LOG_FILENAME} and {URDF_FILENAME}"
             )
     if n_joints is None:  # the log must fit the robot it comes with
-        from spaceid_gym.robots import load_robot
-
         n_joints = load_robot(directory / URDF_FILENAME).n_joints
     log = MeasurementLog.from_csv(directory / LOG_FILENAME, n_joints=n_joints)
     truth_path = directory / TRUTH_FILENAME

@@ -25,7 +25,7 @@ slosh_period_s  log-uniform over :data:`~spaceid_gym.effects.SLOSH_PERIOD_RANGE_
 ==============  ==========================================================================================
 
 The fuel state is drawn as in the evaluation harness (``estimators.evaluation.draw_settings``, which this lower
-layer does not import): fuel consumed uniform between :class:`~spaceid_gym.sim.mission.FuelSchedule`'s
+layer does not import): fuel consumed uniform between :class:`~spaceid_gym.mission.FuelSchedule`'s
 ``initial_fraction`` and ``usable_fraction`` of the robot's full-tank base mass, tank position uniform in its box;
 both as fractions drawn before the robot is known, so that pinning the robot leaves them (and every other axis) as
 drawn. Every axis is drawn on every case in a fixed order, whatever the effect and whatever is pinned; the effect's
@@ -60,8 +60,8 @@ from spaceid_gym.effects import (
 from spaceid_gym.envs.free_floating import FreeFloatingIDEnv
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.excitation import FourierExcitation, SmoothRandomExcitation
+from spaceid_gym.mission import FuelSchedule
 from spaceid_gym.robots import load_robot
-from spaceid_gym.sim.mission import FuelSchedule
 from spaceid_gym.sim.sensors import ARCSEC_RAD, SensorModel
 
 #: the second entry of the seed of :func:`draw_variation`'s generator (``default_rng([seed, VARIATION_STREAM])``),

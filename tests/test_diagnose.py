@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from agents.excitation import FourierExcitation
+from estimators.attitude_channel import AttitudeChannel, AttitudeNoise
 from estimators.diagnostics.compare import compare, model_from_estimate
 from estimators.diagnostics.diagnose import (
     NO_MISSING_EFFECT,
@@ -27,7 +28,6 @@ from estimators.diagnostics.diagnose import (
 )
 from estimators.diagnostics.suite import DIAGNOSTIC_EXCITATION
 from estimators.diagnostics.workflow import parameter_errors, run_loop, write_report
-from estimators.models.attitude_channel import AttitudeChannel, AttitudeNoise
 from estimators.problem import IdentificationModel
 from estimators.registry import make_estimator
 from spaceid_gym.datasets import simulate_episode

@@ -3,12 +3,12 @@
 For a model (robot, parameterisation, effects already in it) and a log, :func:`diagnose`:
 
 1. fits the model as it is (the *baseline*, by default with the ``hybrid`` estimator);
-2. for each candidate effect of the catalogue (:mod:`estimators.models.effects`) not yet in the model,
+2. for each candidate effect of the catalogue (:mod:`estimators.models.effect_models`) not yet in the model,
    fits the model with that effect added, by least squares from the baseline (and from the term's own
    starting points: several slosh frequencies, a light payload), keeping the best;
 3. scores every fit on the whole likelihood: the gyro residuals, ``RSS / sigma^2`` with ``sigma`` the
    residual std of the best-fitting model (``sqrt(RSS / (3T - k))``), plus, when the log has attitude,
-   the star tracker's rotation against the model's (:mod:`estimators.models.attitude_channel`), which
+   the star tracker's rotation against the model's (:mod:`estimators.attitude_channel`), which
    sees the integral of the base rate (a slow torque, a momentum) far more sharply than the gyro and
    is blind to gyro errors (bias, scale, delay), so it also tells a biased gyro from a real rotation. With
    attitude, every fit (the baseline refitted from the estimator's result) minimises both channels
@@ -19,7 +19,7 @@ For a model (robot, parameterisation, effects already in it) and a log, :func:`d
      effect is absent (nested models): ``p_value``; *significant* below ``alpha / (number of
      candidates)`` (Bonferroni);
    * ``bic = X + k ln(n)`` (Schwarz), ``delta_bic`` relative to the baseline (negative is better);
-   * *plausible*: no reason from :meth:`~estimators.models.effects.EffectTerm.implausible` (on a search
+   * *plausible*: no reason from :meth:`~estimators.models.effect_models.EffectTerm.implausible` (on a search
      bound, unphysical payload, no slosh mass);
    * residual reduction, residual RMS and fit % (gyro channel);
 
@@ -65,14 +65,15 @@ from scipy.optimize import least_squares
 from scipy.stats import chi2, norm
 from threadpoolctl import threadpool_limits
 
+from estimators.attitude_channel import AttitudeChannel, AttitudeNoise
 from estimators.base import Estimator
 from estimators.diagnostics.residuals import ResidualAnalysis, analyse_residuals
 from estimators.estimate import Estimate
 from estimators.least_squares import LevenbergMarquardt, interior_start
-from estimators.models.attitude_channel import AttitudeChannel, AttitudeNoise
-from estimators.models.effects import EFFECT_TERMS
+from estimators.models.effect_models import EFFECT_TERMS
 from estimators.parameters import WithEffects
 from estimators.problem import IdentificationModel, IdentificationProblem
+from estimators.registry import make_estimator
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.log import MeasurementLog
 
@@ -131,7 +132,7 @@ class CandidateScores:
 @dataclass(frozen=True)
 class ChannelWeights:
     """The noise of the two channels, which weights them in a joint fit: the gyro's per-sample std (rad/s, per
-    axis) and the attitude residual's error model (:class:`~estimators.models.attitude_channel.AttitudeNoise`)."""
+    axis) and the attitude residual's error model (:class:`~estimators.attitude_channel.AttitudeNoise`)."""
 
     gyro_std_rad_s: float
     attitude: AttitudeNoise
@@ -151,7 +152,7 @@ class ModelFit(CandidateScores):
         rss: sum of squared gyro residuals, (rad/s)^2; ``n_residuals`` 3T; ``n_params`` k.
         attitude_chi2: the attitude channel's ``-2 log L`` at the fit under the error model refitted there
             (``attitude_noise``), less the log-determinant of the error model of the channel's weights
-            (:meth:`~estimators.models.attitude_channel.AttitudeChannel.profile_chi2`): a chi-square over
+            (:meth:`~estimators.attitude_channel.AttitudeChannel.profile_chi2`): a chi-square over
             ``n_attitude_values`` values whose differences between fits are profile likelihood ratios (``None``
             without attitude in the log).
         physical: the fitted quantities (base and effects), as in the estimate file.
@@ -318,7 +319,7 @@ def fit_model(
     ``log`` if the caller has built it already (else built here when ``weights`` are given); ``problem``: ``model``'s
     problem on ``log``, likewise. ``profile_noise``: the attitude error model is a nuisance refitted at this model's
     fit (and the fit refined under it), so that the fits' ``attitude_chi2`` differ by profile likelihood ratios
-    (:meth:`~estimators.models.attitude_channel.AttitudeChannel.profile_chi2`); else ``weights``' error model is
+    (:meth:`~estimators.attitude_channel.AttitudeChannel.profile_chi2`); else ``weights``' error model is
     taken as known.
     """
     begin = time.perf_counter()
@@ -492,8 +493,6 @@ def diagnose(
         estimator: fits the baseline (default ``hybrid`` with seed 0).
         alpha: family-wise significance level of the likelihood-ratio tests.
     """
-    from estimators.registry import make_estimator
-
     if not 0.0 < alpha < 1.0:
         raise SpaceIdInputError(f"alpha: expected a level in (0, 1), got {alpha!r}")
     present = {spec.partition("[")[0] for spec in model.effects}
@@ -603,7 +602,7 @@ def attitude_gyro_dependence(differences: FloatArray, gyro_residual: FloatArray,
     return rho, float(2.0 * norm.sf(abs(rho) * math.sqrt(a.size)))
 
 
-#: how many of a term's grid candidates (:meth:`~estimators.models.effects.EffectTerm.grid`) start local fits
+#: how many of a term's grid candidates (:meth:`~estimators.models.effect_models.EffectTerm.grid`) start local fits
 GRID_STARTS = 3
 
 

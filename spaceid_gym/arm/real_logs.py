@@ -44,7 +44,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from spaceid_gym.arm.log import ArmLog
+from spaceid_gym.arm.joint_log import ArmLog
 from spaceid_gym.errors import SpaceIdInputError
 
 FloatArray = NDArray[np.float64]

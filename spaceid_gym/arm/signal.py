@@ -40,7 +40,7 @@ import numpy as np
 import scipy.signal
 from numpy.typing import NDArray
 
-from spaceid_gym.arm.log import ArmLog
+from spaceid_gym.arm.joint_log import ArmLog
 from spaceid_gym.errors import SpaceIdInputError
 
 FloatArray = NDArray[np.float64]

@@ -55,7 +55,7 @@ from estimators.models.fractional_delay import delay_samples
 from spaceid_gym.effects import remaining_liquid_kg
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.log import MeasurementLog
-from spaceid_gym.physics.inertia import RigidBodyInertia, skew, spatial_inertia_matrix
+from spaceid_gym.physics.inertia import PARAMS10_NAMES, RigidBodyInertia, skew, spatial_inertia_matrix
 from spaceid_gym.robots import Robot
 from spaceid_gym.sim.lie import matrix_from_quat, so3_exp
 
@@ -388,6 +388,26 @@ PAYLOAD_SIZE_M = 1.0
 PAYLOAD_GRID_ARM_FRACTIONS = (0.05, 0.2, 0.5, 1.0, 2.0, 4.0)
 
 
+#: the payload's unknowns: its params10 (pinocchio order) about the last joint's origin, in its frame
+PAYLOAD_NAMES = tuple(f"payload_{n}" for n in PARAMS10_NAMES)
+
+#: the size (m) of the typical payload that scales the fits: an object as heavy as the arm and this size across
+TYPICAL_PAYLOAD_SIZE_M = 0.5
+
+
+def payload_box(payload_max_kg: float, payload_size_m: float) -> tuple[FloatArray, FloatArray]:
+    """The search box (lower, upper), each (10,), of a payload's params10 up to ``payload_max_kg`` and ``payload_size_m``.
+
+    Mass in ``[0, m]``; first moments within ``+-m s`` (kg m); diagonal inertia in ``[0, 2 m s^2]`` and off-diagonal
+    within ``+-m s^2`` (kg m^2), with ``m = payload_max_kg`` and ``s = payload_size_m``.
+    """
+    m_max, size = float(payload_max_kg), float(payload_size_m)
+    if not (np.isfinite(m_max) and m_max > 0.0 and np.isfinite(size) and size > 0.0):
+        raise SpaceIdInputError("payload parameters: payload_max_kg and payload_size_m must be positive numbers")
+    h, j = m_max * size, m_max * size**2
+    return np.array([0.0, -h, -h, -h, 0.0, -j, 0.0, -j, -j, 0.0]), np.array([m_max, h, h, h, 2 * j, j, 2 * j, j, j, 2 * j])
+
+
 class Payload(EffectTerm):
     """10 inertial parameters of an object held by the last link (about the last joint's origin, its frame).
 
@@ -403,15 +423,13 @@ class Payload(EffectTerm):
     stage = "body"
 
     def __init__(self, robot: Robot) -> None:
-        from estimators.parameters import PayloadParameters  # the same ranges as the payload parameterisation
-
         self.arm_mass_kg = robot.arm_mass_kg()
         robot_kg = robot.base_full.mass_kg + self.arm_mass_kg
-        ranges = PayloadParameters(robot, payload_max_kg=PAYLOAD_MAX_FRACTION_OF_ROBOT * robot_kg, payload_size_m=PAYLOAD_SIZE_M)
-        typical = PayloadParameters(robot)
-        self.names = ranges.names
+        lower, upper = payload_box(PAYLOAD_MAX_FRACTION_OF_ROBOT * robot_kg, PAYLOAD_SIZE_M)
+        typical_lower, typical_upper = payload_box(self.arm_mass_kg, TYPICAL_PAYLOAD_SIZE_M)
+        self.names = PAYLOAD_NAMES
         self.truth_fields = (("payload_params10", 10),)
-        super().__init__(ranges.nominal, ranges.lower, ranges.upper, typical.upper - typical.lower)
+        super().__init__(np.zeros(10), lower, upper, typical_upper - typical_lower)
 
     def starts(self, theta_base: FloatArray | None = None) -> list[FloatArray]:
         """A light compact object at the last joint (a zero mass sits on the bound, where the rest has no effect)."""

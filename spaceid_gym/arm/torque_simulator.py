@@ -72,7 +72,7 @@ import pinocchio as pin
 from numpy.typing import NDArray
 
 from spaceid_gym.arm.friction import FrictionModel
-from spaceid_gym.arm.log import EFFORT_KINDS, ArmLog
+from spaceid_gym.arm.joint_log import EFFORT_KINDS, ArmLog
 from spaceid_gym.arm.real_logs import UR5_TORQUE_CONSTANTS_NM_A
 from spaceid_gym.arm.regressor import ArmRegressor, BaseParameterSet
 from spaceid_gym.arm.robot import ArmRobot
@@ -515,7 +515,7 @@ class ArmSimulator:
 
         Args:
             reference: times (T,) -> (q, dq, ddq) each (T, n) (e.g. a
-                :class:`~spaceid_gym.arm.excitation.FourierTrajectory`), evaluated once at all stage times.
+                :class:`~spaceid_gym.arm.excitation_design.FourierTrajectory`), evaluated once at all stage times.
             duration_s: length, s; ``floor(duration * rate)`` sample periods (samples at 0 .. that time).
             rng: the generator of the sensor noise (one draw of shape (T, 3, n)).
             start_on_reference: start at ``t = 0`` on the reference's state (default), else from
