@@ -50,16 +50,14 @@ from typing import Any, Protocol
 
 import numpy as np
 from numba import njit
-from numpy.typing import NDArray
 from scipy.linalg import cholesky_banded
 from scipy.optimize import minimize
 from scipy.spatial.transform import Rotation, Slerp
 
 from estimators.problem import IdentificationModel
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.log import MeasurementLog
-
-FloatArray = NDArray[np.float64]
 
 
 class BaseRateProblem(Protocol):

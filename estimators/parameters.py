@@ -29,16 +29,14 @@ from abc import ABC, abstractmethod
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from estimators.models.effect_models import PAYLOAD_NAMES, TYPICAL_PAYLOAD_SIZE_M, EffectTerm, payload_box
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.mission import FuelSchedule
 from spaceid_gym.physics.fuel import FUEL_PARAMETER_NAMES, base_params10_after_fuel, base_params10_fuel_jacobian
 from spaceid_gym.physics.inertia import PARAMS10_NAMES, RigidBodyInertia
 from spaceid_gym.robots import Robot
-
-FloatArray = NDArray[np.float64]
 
 
 class Parameterisation(ABC):

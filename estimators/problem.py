@@ -30,13 +30,12 @@ from estimators.estimate import Estimate
 from estimators.models.effect_models import EffectContext, EffectPrediction, make_terms, parse_effects
 from estimators.models.momentum_model import MomentumModel, Samples
 from estimators.parameters import FuelParameters, Parameterisation, WithEffects, make_parameterisation
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.effects import remaining_liquid_kg
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.information import cramer_rao_std
 from spaceid_gym.log import MeasurementLog
 from spaceid_gym.robots import Robot, load_robot
-
-FloatArray = NDArray[np.float64]
 
 #: a parameter is identifiable if its Cramér-Rao std is below this fraction of its search range
 IDENTIFIABLE_FRACTION = 0.25

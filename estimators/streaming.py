@@ -14,12 +14,8 @@ from __future__ import annotations
 
 from typing import Any, Protocol, runtime_checkable
 
-import numpy as np
-from numpy.typing import NDArray
-
 from estimators.problem import IdentificationProblem
-
-FloatArray = NDArray[np.float64]
+from spaceid_gym.arrays import FloatArray
 
 
 @runtime_checkable

@@ -65,15 +65,14 @@ from typing import Any, ClassVar
 
 import numpy as np
 from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from estimators.base import Estimator, SearchResult
 from estimators.least_squares import interior_start
 from estimators.options import check_bool, check_float, finite_vector, positive_option
 from estimators.problem import IdentificationProblem
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
-
-FloatArray = NDArray[np.float64]
 
 #: third differences of white noise of std sigma have std ``sqrt(20) sigma`` (binomial coefficients 1, 3, 3, 1)
 THIRD_DIFFERENCE_GAIN = float(np.sqrt(20.0))

@@ -30,7 +30,7 @@ from spaceid_gym.arm.friction import FRICTION_TERMS
 from spaceid_gym.arm.robot import load_arm
 from spaceid_gym.arm.torque_simulator import INTERNAL_RATE_HZ, SAMPLE_RATE_HZ, ArmSensorModel
 from spaceid_gym.errors import SpaceIdInputError
-from spaceid_gym.log import write_json_atomic, write_text_atomic
+from spaceid_gym.files import write_json_atomic, write_text_atomic
 
 _EFFORTS = {"torque": "torque_Nm", "current": "current_A"}
 

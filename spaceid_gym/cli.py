@@ -50,8 +50,9 @@ from spaceid_gym.datasets import simulate_episode, write_episode_dataset
 from spaceid_gym.demo import run_demo
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.excitation import FourierExcitation
+from spaceid_gym.files import write_json_atomic
 from spaceid_gym.limits import check_count, check_log_size, max_jobs
-from spaceid_gym.log import MeasurementLog, write_json_atomic
+from spaceid_gym.log import MeasurementLog
 from spaceid_gym.mission import FuelSchedule
 from spaceid_gym.robots import load_robot
 from spaceid_gym.sim.sensors import ARCSEC_RAD, ATTITUDE_SOURCES, SensorModel

@@ -34,7 +34,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 from scipy import stats
 
 from estimators.arm.identification import Preparation, fit, raw_period
@@ -51,9 +50,8 @@ from estimators.diagnostics.residuals import Segment, failing_segments
 from estimators.registry import make_estimator
 from spaceid_gym.arm.friction import FRICTION_TERMS
 from spaceid_gym.arm.joint_log import ArmLog
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
-
-FloatArray = NDArray[np.float64]
 
 #: candidate label -> (friction terms added, armature added)
 CANDIDATES: dict[str, tuple[tuple[str, ...], bool]] = {

@@ -27,7 +27,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from estimators.arm.linear_ls import group_weighted
 from estimators.arm.linear_problem import LinearIdentificationProblem
@@ -37,9 +36,8 @@ from estimators.estimate import Estimate
 from spaceid_gym.arm.joint_log import ArmLog
 from spaceid_gym.arm.real_logs import list_movements, load_ur5_movement
 from spaceid_gym.arm.signal import lowpass_zero_phase, parallel_decimation, uniform_period
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
-
-FloatArray = NDArray[np.float64]
 
 #: estimators that weigh the rows themselves (everything else gets the per-joint weights of the module docstring)
 SELF_WEIGHTING = ("ols", "wls")

@@ -103,9 +103,9 @@ from estimators.base import Estimator, SearchResult
 from estimators.estimate import Estimate
 from estimators.options import check_bool, check_float, check_int
 from estimators.problem import IdentificationProblem
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 
-FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
 
 

@@ -23,14 +23,12 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from estimators.arm.linear_problem import LinearIdentificationProblem
 from estimators.base import Estimator, SearchResult
 from estimators.options import check_int
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
-
-FloatArray = NDArray[np.float64]
 
 
 def _linear(problem: Any, name: str) -> LinearIdentificationProblem:

@@ -40,10 +40,10 @@ from estimators.arm.consistency import PhysicalConsistency
 from estimators.estimate import Estimate
 from estimators.parameters import Parameterisation
 from estimators.problem import IdentificationProblem, Samples, identifiability
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.information import cramer_rao_std
 
-FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
 
 

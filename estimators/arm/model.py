@@ -38,9 +38,9 @@ from spaceid_gym.arm.joint_log import ArmLog
 from spaceid_gym.arm.real_logs import UR5_TORQUE_CONSTANTS_NM_A
 from spaceid_gym.arm.regressor import ArmRegressor, BaseParameterSet
 from spaceid_gym.arm.robot import ArmRobot
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 
-FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
 
 #: search range of a link's mass, as factors of its URDF mass (kg); a URDF mass below MIN_NOMINAL_MASS_KG counts as that

@@ -69,21 +69,19 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from estimators.arm.consistency import PhysicalConsistency, pseudo_inertia
 from estimators.arm.linear_ls import _linear, group_weighted
 from estimators.arm.linear_problem import LinearIdentificationProblem
 from estimators.base import Estimator, SearchResult
 from estimators.options import check_float
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 
 try:  # an optional dependency until it is in every lock: the registry must load without it
     import cvxpy as cp
 except ImportError:  # pragma: no cover - exercised only where cvxpy is missing
     cp = None
-
-FloatArray = NDArray[np.float64]
 
 #: singular values of ``A K D`` below this fraction of the largest span the unidentified directions
 NULL_RTOL = 1e-8

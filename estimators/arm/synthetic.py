@@ -34,8 +34,8 @@ from numpy.typing import NDArray
 from estimators.arm.consistency import PhysicalConsistency
 from estimators.arm.linear_problem import LinearIdentificationProblem, image_box
 from estimators.parameters import PARAMS10_NAMES
+from spaceid_gym.arrays import FloatArray
 
-FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
 
 N_JOINTS = 6

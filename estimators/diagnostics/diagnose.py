@@ -60,7 +60,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 from scipy.optimize import least_squares
 from scipy.stats import chi2, norm
 from threadpoolctl import threadpool_limits
@@ -74,10 +73,10 @@ from estimators.models.effect_models import EFFECT_TERMS
 from estimators.parameters import WithEffects
 from estimators.problem import IdentificationModel, IdentificationProblem
 from estimators.registry import make_estimator
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.files import jsonable
 from spaceid_gym.log import MeasurementLog
-
-FloatArray = NDArray[np.float64]
 
 #: the candidates tried by default: the whole catalogue
 DEFAULT_CANDIDATES: tuple[str, ...] = tuple(EFFECT_TERMS)
@@ -212,7 +211,7 @@ class ModelFit(CandidateScores):
             "plausible": self.plausible,
             "implausible": list(self.implausible),
             "parameters": {n: float(v) for n, v in zip(self.names, self.theta, strict=True)},
-            "physical": _jsonable(self.physical),
+            "physical": jsonable(self.physical),
             "wall_time_s": self.wall_time_s,
         }
 
@@ -836,13 +835,3 @@ def nested_p_value(inner: ModelFit, outer: ModelFit) -> float:
     """p-value of the likelihood ratio ``inner.chi2 - outer.chi2`` for ``inner`` nested in ``outer``: chi-square with
     ``outer.n_params - inner.n_params`` degrees of freedom when ``inner`` is the truth (scores from :func:`_score`)."""
     return float(chi2.sf(max(inner.chi2 - outer.chi2, 0.0), outer.n_params - inner.n_params))
-
-
-def _jsonable(value: Any) -> Any:
-    if isinstance(value, dict):
-        return {k: _jsonable(v) for k, v in value.items()}
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.floating | np.integer):
-        return value.item()
-    return value

@@ -31,7 +31,7 @@ from estimators.diagnostics.residuals import (
     white_spectrum_level,
 )
 from spaceid_gym.errors import SpaceIdInputError
-from spaceid_gym.log import write_bytes_atomic
+from spaceid_gym.files import write_bytes_atomic
 
 _SEGMENT_COLOUR = "tab:red"
 _DPI = 100

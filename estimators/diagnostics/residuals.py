@@ -37,9 +37,9 @@ from numpy.typing import ArrayLike, NDArray
 from scipy import fft as sp_fft
 from scipy import optimize, signal, stats
 
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
-
-FloatArray = NDArray[np.float64]
+from spaceid_gym.files import jsonable
 
 #: 1 / Phi^-1(3/4): turns a median absolute deviation of Gaussian data into a standard deviation
 _MAD_TO_STD = 1.0 / float(stats.norm.ppf(0.75))
@@ -651,23 +651,6 @@ def failing_segments(
 # ---------------------------------------------------------------------------------------- analysis
 
 
-def _jsonable(value: Any) -> Any:
-    """Nested dataclasses / arrays / numpy scalars as JSON types; non-finite floats become None."""
-    if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
-    if isinstance(value, np.generic):
-        return _jsonable(value.item())
-    if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if hasattr(value, "_asdict"):  # NamedTuple
-        return _jsonable(value._asdict())
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
-
-
 @dataclass
 class ResidualAnalysis:
     """Everything :func:`analyse_residuals` found about ``residual = measured - predicted``.
@@ -839,7 +822,7 @@ class ResidualAnalysis:
             "consistent_with_noise": self.consistent_with_noise,
             "structure_description": self.structure_description(),
         }
-        return _jsonable(out)
+        return jsonable(out)
 
 
 def analyse_residuals(

@@ -14,7 +14,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from estimators.attitude_channel import AttitudeChannel, AttitudeNoise
 from estimators.base import Estimator
@@ -26,11 +25,10 @@ from estimators.estimate import Estimate
 from estimators.parameters import WithEffects
 from estimators.problem import IdentificationModel
 from estimators.registry import make_estimator
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.log import MeasurementLog
 from spaceid_gym.physics.fuel import FUEL_PARAMETER_NAMES
-
-FloatArray = NDArray[np.float64]
 
 
 def apply_effect(

@@ -52,14 +52,14 @@ from numba import njit
 from numpy.typing import NDArray
 
 from estimators.models.fractional_delay import delay_samples
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.effects import remaining_liquid_kg
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.log import MeasurementLog
 from spaceid_gym.physics.inertia import PARAMS10_NAMES, RigidBodyInertia, skew, spatial_inertia_matrix
 from spaceid_gym.robots import Robot
 from spaceid_gym.sim.lie import matrix_from_quat, so3_exp
-
-FloatArray = NDArray[np.float64]
+from spaceid_gym.specs import parse_setting, split_outside_brackets
 
 #: the base rate (rad/s) that sets the momentum search range: 5 deg/s, a tumbling satellite (a detumbled one
 #: keeps 0.01-0.05 deg/s)
@@ -738,42 +738,24 @@ def parse_effects(spec: str | list[str] | tuple[str, ...] | None) -> list[tuple[
     """``"slosh,external_torque[drift=true]"`` or a list of names -> ``[(name, options), ...]`` (validated, no duplicates)."""
     if spec is None:
         return []
-    items = _split_spec(spec) if isinstance(spec, str) else [str(s) for s in spec]
+    items = split_outside_brackets(spec, "effects") if isinstance(spec, str) else [str(s) for s in spec]
     out: list[tuple[str, dict[str, Any]]] = []
     for item in items:
-        name, _, rest = item.partition("[")
-        name = name.strip()
+        name, pairs = parse_setting(item, "effects")
         if name not in EFFECT_TERMS:
             raise SpaceIdInputError(f"effects: unknown effect {name!r}; expected one of {', '.join(EFFECT_TERMS)}")
         if any(n == name for n, _ in out):
             raise SpaceIdInputError(f"effects: {name!r} given twice")
         options: dict[str, Any] = {}
-        if rest:
-            if not rest.endswith("]"):
-                raise SpaceIdInputError(f"effects: expected name[key=value,...], got {item!r}")
-            for pair in filter(None, (p.strip() for p in rest[:-1].split(","))):
-                key, eq, value = pair.partition("=")
-                if not eq or key.strip() != "drift" or name != "external_torque":
-                    raise SpaceIdInputError(f"effects: {item!r}: the only option is external_torque[drift=true|false]")
-                if value.strip().lower() not in ("true", "false"):
-                    raise SpaceIdInputError(f"effects: {item!r}: drift must be true or false")
-                options["drift"] = value.strip().lower() == "true"
+        for pair in pairs or []:
+            key, eq, value = pair.partition("=")
+            if not eq or key.strip() != "drift" or name != "external_torque":
+                raise SpaceIdInputError(f"effects: {item!r}: the only option is external_torque[drift=true|false]")
+            if value.strip().lower() not in ("true", "false"):
+                raise SpaceIdInputError(f"effects: {item!r}: drift must be true or false")
+            options["drift"] = value.strip().lower() == "true"
         out.append((name, options))
     return out
-
-
-def _split_spec(spec: str) -> list[str]:
-    """Split at commas outside brackets."""
-    items, depth, current = [], 0, ""
-    for ch in spec:
-        depth += (ch == "[") - (ch == "]")
-        if ch == "," and depth == 0:
-            items.append(current)
-            current = ""
-        else:
-            current += ch
-    items.append(current)
-    return [s.strip() for s in items if s.strip()]
 
 
 def make_terms(

@@ -17,11 +17,10 @@ from spaceid_gym.arm.joint_log import ArmLog
 from spaceid_gym.arm.regressor import ArmRegressor, BaseParameterSet
 from spaceid_gym.arm.robot import ArmRobot, load_arm
 from spaceid_gym.arm.torque_simulator import ArmSensorModel, ArmSimulator, ParameterPrior, TrackingController, nominal_parameters
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.envs.actions import checked_action
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.information import add_information, cramer_rao_std
-
-FloatArray = NDArray[np.float64]
 
 #: the default identification window: 3750 steps, 30 s at 125 Hz (the registered ``max_episode_steps``)
 WINDOW_STEPS = 3750

@@ -17,12 +17,10 @@ from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
-from numpy.typing import NDArray
 
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.physics.inertia import RigidBodyInertia
-
-FloatArray = NDArray[np.float64]
 
 _SUPPORTED_JOINTS = {"revolute", "fixed"}
 

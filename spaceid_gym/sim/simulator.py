@@ -54,8 +54,8 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 from numba import njit
-from numpy.typing import NDArray
 
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.effects import HiddenEffects
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.physics.inertia import RigidBodyInertia, point_mass_inertia
@@ -63,8 +63,6 @@ from spaceid_gym.physics.momentum import momentum_world_to_base
 from spaceid_gym.robots.robot import Robot
 from spaceid_gym.sim.lie import dexp_inv, quat_from_matrix, so3_exp
 from spaceid_gym.sim.servo import RateServo, default_servo
-
-FloatArray = NDArray[np.float64]
 
 
 @dataclass
