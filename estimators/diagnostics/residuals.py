@@ -150,7 +150,7 @@ def noise_floor_std(residual: ArrayLike, order: int = 2) -> FloatArray:
     r, _ = _columns(residual, "noise_floor_std: residual", min_rows=order + 1)
     d = np.diff(r, n=order, axis=0)
     scale = math.sqrt(math.comb(2 * order, order))
-    mad = np.median(np.abs(d - np.median(d, axis=0)), axis=0)
+    mad = stats.median_abs_deviation(d, axis=0)  # median |d - median(d)|, unscaled
     rms = np.sqrt(np.mean(d**2, axis=0))
     return np.where(mad > 0.0, mad * _MAD_TO_STD, rms) / scale
 
