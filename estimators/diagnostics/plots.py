@@ -23,13 +23,13 @@ from scipy import stats
 
 from estimators.diagnostics.report import PathLike
 from estimators.diagnostics.residuals import (
-    FloatArray,
     ResidualAnalysis,
     Segment,
     SpectralPeak,
     periodogram,
     white_spectrum_level,
 )
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.files import write_bytes_atomic
 
