@@ -33,34 +33,20 @@ this package.
 
 from __future__ import annotations
 
-from estimators.diagnostics.residuals.analysis import ResidualAnalysis, analyse_residuals
-from estimators.diagnostics.residuals.correlation import (
-    CrossCorrelation,
-    autocorrelation,
-    cross_correlation,
-    ljung_box,
-    white_noise_band,
-)
-from estimators.diagnostics.residuals.noise import fit_percent, noise_floor_dof, noise_floor_std
-from estimators.diagnostics.residuals.segments import MOVING_THRESHOLD_RAD_S, Segment, failing_segments
-from estimators.diagnostics.residuals.spectrum import SpectralPeak, dominant_frequencies, periodogram, white_spectrum_level
-
-__all__ = [
-    "MOVING_THRESHOLD_RAD_S",
-    "CrossCorrelation",
-    "ResidualAnalysis",
-    "Segment",
-    "SpectralPeak",
-    "analyse_residuals",
-    "autocorrelation",
-    "cross_correlation",
-    "dominant_frequencies",
-    "failing_segments",
-    "fit_percent",
-    "ljung_box",
-    "noise_floor_dof",
-    "noise_floor_std",
-    "periodogram",
-    "white_noise_band",
-    "white_spectrum_level",
-]
+from estimators.diagnostics.residuals.analysis import ResidualAnalysis as ResidualAnalysis
+from estimators.diagnostics.residuals.analysis import analyse_residuals as analyse_residuals
+from estimators.diagnostics.residuals.correlation import CrossCorrelation as CrossCorrelation
+from estimators.diagnostics.residuals.correlation import autocorrelation as autocorrelation
+from estimators.diagnostics.residuals.correlation import cross_correlation as cross_correlation
+from estimators.diagnostics.residuals.correlation import ljung_box as ljung_box
+from estimators.diagnostics.residuals.correlation import white_noise_band as white_noise_band
+from estimators.diagnostics.residuals.noise import fit_percent as fit_percent
+from estimators.diagnostics.residuals.noise import noise_floor_dof as noise_floor_dof
+from estimators.diagnostics.residuals.noise import noise_floor_std as noise_floor_std
+from estimators.diagnostics.residuals.segments import MOVING_THRESHOLD_RAD_S as MOVING_THRESHOLD_RAD_S
+from estimators.diagnostics.residuals.segments import Segment as Segment
+from estimators.diagnostics.residuals.segments import failing_segments as failing_segments
+from estimators.diagnostics.residuals.spectrum import SpectralPeak as SpectralPeak
+from estimators.diagnostics.residuals.spectrum import dominant_frequencies as dominant_frequencies
+from estimators.diagnostics.residuals.spectrum import periodogram as periodogram
+from estimators.diagnostics.residuals.spectrum import white_spectrum_level as white_spectrum_level
