@@ -16,9 +16,6 @@ from estimators.diagnostics.diagnose import (
     UNEXPLAINED,
     ChannelWeights,
     ModelFit,
-    _prefer_encompassing,
-    _score,
-    _scored,
     _verdict,
     candidate_model,
     diagnose,
@@ -26,7 +23,9 @@ from estimators.diagnostics.diagnose import (
     fit_model,
     nested_p_value,
 )
+from estimators.diagnostics.model_fit import _scored
 from estimators.diagnostics.suite import DIAGNOSTIC_EXCITATION
+from estimators.diagnostics.verdict import _prefer_encompassing, _score
 from estimators.diagnostics.workflow import parameter_errors, run_loop, write_report
 from estimators.problem import IdentificationModel
 from estimators.registry import make_estimator
