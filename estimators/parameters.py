@@ -30,7 +30,8 @@ from typing import Any
 
 import numpy as np
 
-from estimators.models.effect_models import PAYLOAD_NAMES, TYPICAL_PAYLOAD_SIZE_M, EffectTerm, payload_box
+from estimators.models.effect_base import EffectTerm
+from estimators.models.mass_effects import PAYLOAD_NAMES, TYPICAL_PAYLOAD_SIZE_M, payload_box
 from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.mission import FuelSchedule
