@@ -33,17 +33,17 @@ For a model (robot, parameterisation, effects already in it) and a log, :func:`d
      candidate that fits better than the leader but pays more unknowns in the BIC is fitted together with the
      leader; if adding it to the leader lowers the chi-square significantly and adding the leader to it does
      not (each at ``alpha`` over the number of such challengers), it explains what the leader explains and
-     more. (A MEMS gyro's scale and misalignment, 9 unknowns, lowered the chi-square by 74 where a delay, 1
-     unknown, lowered it by 19: BIC named the delay; with both, the delay added nothing.)
+     more: a gyro's scale and misalignment (9 unknowns) can lower the chi-square far more than a delay (1
+     unknown) and still lose to it on BIC.
 
    The verdict names it if it explains at least :data:`EXPLAINED_FRACTION` of the baseline's excess over the
    noise (``X_baseline - (n - k)``, :func:`explained_fraction`) or if what it leaves is consistent with the
    noise: its gyro residual passes every test of :func:`~estimators.diagnostics.residuals.analyse_residuals`
    (white, uncorrelated with the inputs, no failing segment) and, with attitude, the star tracker's
    chi-square is below the ``1 - alpha`` quantile of its count (``attitude_p_value >= alpha``). The excess
-   itself varies by about ±134 from log to log through the star tracker's part (the gyro's chi-square is
-   scaled to the best fit's residual, so the gyro's part is at its count by construction), so a share of it
-   is no test when it is that small. ``"none"`` when no candidate is significant and the
+   itself varies from log to log through the star tracker's part (the gyro's chi-square is scaled to the best
+   fit's residual, so the gyro's part is at its count by construction), so a share of a small excess is no
+   test. How these rules came to be, with the logs that asked for them: the documentation's results page. ``"none"`` when no candidate is significant and the
    baseline residual is white (:func:`~estimators.diagnostics.residuals.analyse_residuals`); ``"unexplained"``
    otherwise, with the residual structure described (dominant frequencies, correlated inputs, where in time).
 
