@@ -44,9 +44,12 @@ test: $(STAMP)
 	@$(BIN)/python -m pytest; rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "make test: pytest collected no tests"; exit 1; fi; exit $$rc
 
+# lint-imports: the import contract of pyproject.toml (layers top -> identification -> core, no cycles; see
+# docs/architecture.md); tests/test_import_structure.py checks the rest (no import inside a function)
 lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
+	$(BIN)/lint-imports --no-cache --no-logo
 
 # the documentation site (docs/, mkdocs.yml) into site/; --strict: a broken link, anchor or API reference fails
 docs: $(STAMP)

@@ -1,6 +1,6 @@
 """Classic vs improved artificial bee colony, each improvement switched off in turn, at equal evaluations.
 
-Problem (``estimators.synthetic_arm.arm_benchmark``): pinocchio's sample 6R manipulator with Coulomb and
+Problem (``estimators.arm.synthetic.arm_benchmark``): pinocchio's sample 6R manipulator with Coulomb and
 viscous friction, 50 base parameters (pivoted QR of the 72 full ones), identification data 4
 independent 5 s Fourier segments at 20 Hz (2400 torque rows), white torque noise of about 2 % of each
 joint's torque RMS (0.06-0.5 N m), and a held-out 10 s segment with its own trajectory and noise.
@@ -59,7 +59,7 @@ Figures (10 seeds; a 2-core machine shared with other jobs, so times are upper b
 
 Reading: the principal-axis moves carry the improvement (without them the colony is as slow as the
 classic one); the scaled fitness halves the error at 50 000 evaluations; the patent's ``F_ij`` (as
-defined in :mod:`estimators.abc`) and gbest guidance slow it down on this problem. At 200 000
+defined in :mod:`estimators.arm.improved_abc`) and gbest guidance slow it down on this problem. At 200 000
 evaluations the improved colony matches WLS (error at the bound, held-out error at the noise floor); the
 consistent colony, searching 72 nonlinear coordinates, is not there yet (2.9 x the bound). Where the data
 are poor, least squares fits the noise (held-out error 77 x the noise) and the constrained colonies do
@@ -76,10 +76,10 @@ from typing import Any
 
 import numpy as np
 
-from estimators.abc import ArtificialBeeColony, ImprovedABC
+from estimators.arm.improved_abc import ArtificialBeeColony, ImprovedABC
+from estimators.arm.linear_ls import OrdinaryLeastSquares, WeightedLeastSquares
+from estimators.arm.synthetic import ArmBenchmark, arm_benchmark
 from estimators.base import Estimator
-from estimators.linear_ls import OrdinaryLeastSquares, WeightedLeastSquares
-from estimators.synthetic_arm import ArmBenchmark, arm_benchmark
 
 
 def variants(evaluations: int) -> dict[str, Callable[[int], Estimator]]:

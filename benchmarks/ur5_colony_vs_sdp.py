@@ -5,7 +5,7 @@ noise units, and the time per fit.
 Per dataset seed ``d``: the true UR5 drawn around the URDF with Coulomb + viscous friction (``ParameterPrior``), a
 training log (``--duration`` s, random Fourier excitation, seed ``d``) and a held-out log (20 s, seed ``d + 1``, the
 same robot) at 125 Hz with the default sensor noise, through the identification chain
-(:class:`~estimators.arm_identification.Preparation`); the problem is the joint-weighted cost the colonies minimise.
+(:class:`~estimators.arm.identification.Preparation`); the problem is the joint-weighted cost the colonies minimise.
 Then ``sdp`` once, and ``improved-abc[consistent=true,polish=true]`` with colony seeds ``0 .. --seeds - 1`` at each
 budget of ``--budgets`` (``default`` is the estimator's own: 5000 cycles, 200 000 evaluations).
 
@@ -13,7 +13,7 @@ With ``--real FOLDER`` (the real UR5 logs, ``shared/data/ur5-real``): every fold
 undisturbed movements instead, the model with Coulomb + viscous friction (``--armature``: and a rotor inertia).
 
 Excess: ``(cost_colony - cost_sdp) / cost_sdp`` on the same training cost; slightly negative values are the sdp's
-regulariser trade (:mod:`estimators.sdp`). Held-out: residual RMS over the processed noise floor (1 = the floor) on
+regulariser trade (:mod:`estimators.arm.sdp`). Held-out: residual RMS over the processed noise floor (1 = the floor) on
 simulated data, the relative error over all joints (%) on real data.
 
 Run: ``.venv/bin/python benchmarks/ur5_colony_vs_sdp.py --datasets 3 --seeds 20 --budgets 20000,default`` and
@@ -30,7 +30,7 @@ import time
 
 import numpy as np
 
-from estimators.arm_identification import (
+from estimators.arm.identification import (
     Preparation,
     fit,
     joint_weighted,
@@ -39,8 +39,8 @@ from estimators.arm_identification import (
     prediction_error,
     processed_noise_floor,
 )
+from estimators.arm.model import ArmIdentificationModel, IdentificationRows
 from estimators.evaluation import estimator_from_spec
-from estimators.models.arm_model import ArmIdentificationModel, IdentificationRows
 from spaceid_gym.arm.datasets import simulate_train_and_held_out
 from spaceid_gym.arm.robot import load_arm
 

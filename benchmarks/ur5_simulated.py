@@ -4,7 +4,7 @@ physical consistency, for WLS and the bee colonies at equal evaluations.
 Per seed: the true robot is drawn around the URDF (``ParameterPrior``, Coulomb + viscous friction), a training log
 (``--duration`` s on an optimised Fourier excitation) and a held-out log (a random Fourier excitation, fresh noise) of
 that same robot are simulated at 125 Hz with the default sensor noise, and both go through the identification chain
-(:class:`~estimators.arm_identification.Preparation`: 4 Hz zero-phase low-pass, ddq by differentiation, the
+(:class:`~estimators.arm.identification.Preparation`: 4 Hz zero-phase low-pass, ddq by differentiation, the
 regressor filtered in parallel with the torque, 25 Hz).
 
 Figures per estimator (mean over seeds, and the worst seed):
@@ -26,10 +26,10 @@ import time
 
 import numpy as np
 
-from estimators.arm_identification import Preparation, fit, physically_consistent, prediction_error, processed_noise_floor
+from estimators.arm.identification import Preparation, fit, physically_consistent, prediction_error, processed_noise_floor
+from estimators.arm.linear_problem import LinearIdentificationProblem
+from estimators.arm.model import ArmIdentificationModel
 from estimators.evaluation import estimator_from_spec
-from estimators.linear_problem import LinearIdentificationProblem
-from estimators.models.arm_model import ArmIdentificationModel
 from spaceid_gym.arm.datasets import simulate_train_and_held_out
 from spaceid_gym.arm.robot import load_arm
 

@@ -18,14 +18,12 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
-from numpy.typing import NDArray
 
 from estimators.estimate import Estimate
 from estimators.problem import IdentificationModel, IdentificationProblem
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.log import MeasurementLog
-
-FloatArray = NDArray[np.float64]
 
 
 @dataclass

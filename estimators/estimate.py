@@ -15,23 +15,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from spaceid_gym.log import write_json_atomic
-
-FloatArray = NDArray[np.float64]
-
-
-def _jsonable(value: Any) -> Any:
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, dict):
-        return {k: _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, float) and not np.isfinite(value):
-        return None
-    return value
+from spaceid_gym.arrays import FloatArray
+from spaceid_gym.files import jsonable, write_json_atomic
 
 
 @dataclass
@@ -149,7 +134,7 @@ class Estimate:
             cost_history=self.cost_history,
             **self.extra,
         )
-        return _jsonable(out)
+        return jsonable(out)
 
     def write_json(self, path: str | Path) -> Path:
         """Write :meth:`to_dict` to ``path`` atomically (a temporary file renamed into place), creating its folder."""

@@ -16,7 +16,7 @@ the RMS Cramér-Rao standard deviation (bound at the true parameters with the tr
 efficient unbiased estimator would have (``sqrt(2/pi)`` times the bound, in the same units), the
 figure to hold against the paper's Table 1 when the bound lies above it.
 
-Settings: fuel consumed ``mdf ~ U(initial, usable)`` of :class:`~spaceid_gym.sim.mission.FuelSchedule`
+Settings: fuel consumed ``mdf ~ U(initial, usable)`` of :class:`~spaceid_gym.mission.FuelSchedule`
 (5-25 % of the wet base mass, 27.5-137.5 kg for ``paper6``), tank position uniform in its box
 (+-0.40 m per axis for ``paper6``, from the full-tank CoM); a 60 s window at 50 Hz; excitation
 :class:`~spaceid_gym.excitation.FourierExcitation` seeded per setting; the default
@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import json
 import math
-import re
 from collections.abc import Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass
@@ -38,19 +37,19 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from tqdm import tqdm
 
 from estimators.base import Estimator
 from estimators.problem import IdentificationModel, IdentificationProblem
 from estimators.registry import make_estimator
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.datasets import simulate_episode
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.excitation import FourierExcitation
-from spaceid_gym.log import write_csv_atomic, write_text_atomic
+from spaceid_gym.files import write_csv_atomic, write_text_atomic
+from spaceid_gym.mission import FuelSchedule
 from spaceid_gym.robots import Robot, load_robot
-from spaceid_gym.sim.mission import FuelSchedule
-
-FloatArray = NDArray[np.float64]
+from spaceid_gym.specs import parse_setting, split_outside_brackets
 
 #: the paper's Table 1 (improved PSO, % errors)
 PAPER_TABLE1 = {"M": 0.60, "r": 2.79, "Ixx": 0.61, "Iyy": 0.63, "Izz": 0.93}
@@ -83,29 +82,9 @@ def draw_settings(robot: Robot, n_settings: int, seed: int, schedule: FuelSchedu
     return out
 
 
-def _split_outside_brackets(text: str, what: str) -> list[str]:
-    """``text`` split at the commas not inside ``[...]`` (any depth), each part stripped, empty parts dropped.
-
-    Unbalanced brackets raise :class:`SpaceIdInputError` naming ``what`` (the list or spec being read).
-    """
-    parts: list[str] = []
-    depth, start = 0, 0
-    for i, char in enumerate(text):
-        depth += {"[": 1, "]": -1}.get(char, 0)
-        if depth < 0:
-            raise SpaceIdInputError(f"{what}: unbalanced ']' at character {i + 1} of {text!r}")
-        if char == "," and depth == 0:
-            parts.append(text[start:i])
-            start = i + 1
-    if depth:
-        raise SpaceIdInputError(f"{what}: unclosed '[' in {text!r}")
-    parts.append(text[start:])
-    return [p.strip() for p in parts if p.strip()]
-
-
 def parse_estimator_specs(text: str) -> list[str]:
     """Split ``"improved-pso,pso[topology=ring,n_particles=20],lm"`` at the commas outside brackets."""
-    specs = _split_outside_brackets(text, "estimators")
+    specs = split_outside_brackets(text, "estimators")
     if not specs:
         raise SpaceIdInputError("estimators: expected a comma-separated list of estimator names")
     return specs
@@ -115,11 +94,9 @@ def estimator_from_spec(spec: str, **overrides: Any) -> Estimator:
     """``name[key=value,...]`` -> the registered estimator with those options (values parsed as JSON where
     possible, so ``inertia=[0.9,0.4]`` is a pair); ``overrides`` (e.g. ``seed``, ``max_evaluations``) replace
     options of the same name."""
-    match = re.fullmatch(r"\s*([\w.-]+)\s*(?:\[(.*)\])?\s*", spec)
-    if match is None:
-        raise SpaceIdInputError(f"estimator spec {spec!r}: expected name or name[key=value,...]")
+    name, items = parse_setting(spec, f"estimator spec {spec!r}")
     options: dict[str, Any] = {}
-    for item in _split_outside_brackets(match.group(2) or "", f"estimator spec {spec!r}"):
+    for item in items or []:
         key, sep, raw = item.partition("=")
         if not sep:
             raise SpaceIdInputError(f"estimator spec {spec!r}: option {item!r} is not key=value (list values: key=[a,b])")
@@ -127,7 +104,7 @@ def estimator_from_spec(spec: str, **overrides: Any) -> Estimator:
             options[key.strip()] = json.loads(raw.strip())
         except json.JSONDecodeError:
             options[key.strip()] = raw.strip()
-    return make_estimator(match.group(1), **{**options, **overrides})
+    return make_estimator(name, **{**options, **overrides})
 
 
 @dataclass(frozen=True)
@@ -235,8 +212,6 @@ def run_evaluation(
     progress: bool = True,
 ) -> list[dict[str, Any]]:
     """Rows (one per setting and estimator) of :func:`evaluate_setting` over ``settings``, with a progress bar."""
-    from tqdm import tqdm
-
     for spec in specs:
         estimator_from_spec(spec)  # bad names and options fail before any simulation
     load_robot(robot)

@@ -37,11 +37,8 @@ single lowest one is selected for; ``consensus=False`` drops it). The better rep
 if its whole-log cost is lower; the checked personal best's noisy excess is replaced by its exact
 whole-log one. Stored personal bests keep their raw cost and subset, so a new reference re-bases
 them exactly (``excess = raw - c_s(x_ref)``); as the swarm closes in on the reference the remaining
-subset noise (the ``e_s`` cross term, proportional to ``|x - x_ref|``) shrinks with it. It matters
-(measured with the earlier defaults, Shi and Eberhart's inertia, K = 5, no quadratic step):
-on 40 simulated episodes (3 seeds each), ranking raw subset costs instead ends 8.4 chi-square units
-above the likelihood optimum on average (3.2 with excess costs) and the RMS errors grow from
-1.3-1.5 to 2.2-2.6 Cramér-Rao std.
+subset noise (the ``e_s`` cross term, proportional to ``|x - x_ref|``) shrinks with it. Ranking raw subset
+costs instead ends the search further above the likelihood optimum (figures on the results page).
 
 **Not in the paper: ``quadratic`` and ``follow_fraction``** (both on by default;
 ``improved-pso[quadratic=false,follow_fraction=0]`` is the paper's method alone).
@@ -59,8 +56,8 @@ above the likelihood optimum on average (3.2 with excess costs) and the RMS erro
   when it did not lower the cost, twice it when it did (a simplified trust-region rule: Conn, Gould
   and Toint, *Trust-Region Methods*, 2000, ch. 6, also weigh the decrease against the model's and
   never shrink after a good step). In a thin curved valley the fitted step points along the valley
-  but overshoots its floor; without the radius the same rejected step came back generation after
-  generation (traced on setting 33 of seed 3, which ended 9.8 chi-square units up without it).
+  but overshoots its floor; without the radius the same rejected step would come back generation after
+  generation.
 * ``follow_fraction``: in a generation where the incumbent moved (a candidate check or the quadratic
   step), the worst ``round(follow_fraction N)`` particles (at least one) move to it: one onto it, the
   rest scattered round it as far as it moved (:meth:`ImprovedPSO._follow`). In a reset generation the
@@ -70,30 +67,8 @@ above the likelihood optimum on average (3.2 with excess costs) and the RMS erro
   when the tank is nearly empty) its isotropic moves creep along the valley for the whole run; with it
   the quadratic step gets points round the incumbent to fit, and walks the valley.
 
-Measured with ``python benchmarks/swarm_tuning.py --seed S --estimators improved-pso`` (``--settings 100``
-for the first two rows of seed 1; the earlier rows at commits 0b11430 and 1888813): excess chi-square over the likelihood
-optimum, mean / 90th percentile; mean error of M as a multiple of the efficient ``hybrid``'s. The
-local fit and ``follow_fraction`` were found on the 200 settings of seed 3 (``follow_fraction`` 0.2
-converged too early: two windows ended in another basin, 144 and 188 chi-square units up, mean excess
-1.71, M 1.24x; ``--seed 3 --estimators "improved-pso[follow_fraction=0.2],improved-pso"``), then
-checked on seeds 1 and 2; the trust radius was found on the windows of seed 3 that ended furthest up
-(a first form, a factor on the fitted step with a floor of 1/8, left one window of seed 2 far up, so
-the radius bounds the step's length instead), then checked on all of seeds 3, 1 and 2. The README's
-evaluation uses seed 0:
-
-=================================  =================  =================  =================
-settings                           seed 3 (200)       seed 2 (200)       seed 1 (100 / 200)
-=================================  =================  =================  =================
-earlier default (see below)        1.67 / 5.0, 1.28x  1.00 / 3.3, 1.18x  1.11 / 3.5, 0.97x
-local fit and following            0.24 / 0.1, 1.01x  0.20 / 0.0, 1.13x  0.26 / 0.0, 1.02x
-both, and the trust radius (now)   0.01 / 0.0, 1.00x  0.06 / 0.0, 1.06x  0.00 / 0.0, 1.00x (200)
-=================================  =================  =================  =================
-
-(earlier default: the quadratic step fitted to the swarm's lowest points anywhere, no following, no
-trust radius. Without the trust radius on the 200 settings of seed 1: 0.14 / 0.0, 1.00x.)
-Following can also settle the swarm early: on the README's seed-0 settings, of the three windows that
-end more than 8 chi-square units up, two end within 1 unit of the optimum without it (one of them,
-setting 141, is in another basin with it).
+How these defaults were found, and what each addition gains, with the commands that measure it: the
+documentation's results page, *How the swarm's defaults were chosen*.
 
 The estimate is the best, on the whole log, of the incumbent and the final neighbourhood bests
 (evaluated on the whole log, counted). ``cost_history`` is the incumbent's whole-log cost after each
@@ -103,16 +78,10 @@ Swarm size: ``n_particles=None`` takes ``PARTICLES_PER_EVALUATION x n_subsets`` 
 ``sequential`` (``PARTICLES_PER_EVALUATION`` without), so a generation costs about
 ``PARTICLES_PER_EVALUATION`` whole-log evaluations either way and the ablations run at the same
 budget (about 2170 whole-log evaluations for G = 50 with the defaults, 2114 with neither addition). 40 particles per evaluation keeps a fit on a
-60 s, 50 Hz log under 0.5 s. The number of subsets K = 3 (120 particles) was chosen with the
-defaults of :mod:`estimators.swarm` on settings disjoint from the README's evaluation
-(``benchmarks/swarm_tuning.py``): on the 100 seed-1 settings K = 3 ended closer to the optimum than
-K = 2, 4 or 5 (mean excess chi-square 1.1 against 2.5, 1.6, 1.5), and on the 200 seed-2 settings
-the mean error of M was 1.18x the efficient ``hybrid``'s, against 1.56x with the earlier defaults
-(K = 5, Shi and Eberhart's inertia ``(0.9, 0.4)``, a velocity limit of 0.2; 1.75x without the step;
-all measured before ``follow_fraction`` and the local quadratic fit, with the K = 3 search run with
-``improved-pso[n_subsets=...]`` at commit 0b11430). Fewer subsets mean more samples per
-evaluation (a subset of ``3T/K`` residuals resolves only ~``sqrt(K)`` Cramér-Rao std) and a smaller
-swarm. ``interleaved`` subsets beat ``contiguous`` ones (each subset sees the whole excitation).
+60 s, 50 Hz log under 0.5 s. The number of subsets is K = 3 (120 particles; chosen on settings disjoint from
+the README's evaluation, see the results page): fewer subsets mean more samples per evaluation (a subset of
+``3T/K`` residuals resolves only ~``sqrt(K)`` Cramér-Rao std) but a smaller swarm for the same budget.
+``interleaved`` subsets are the default: each sees the whole excitation, where a ``contiguous`` one sees a part.
 """
 
 from __future__ import annotations

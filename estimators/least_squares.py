@@ -18,7 +18,7 @@ from __future__ import annotations
 from typing import Any, ClassVar
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 from scipy.optimize import least_squares
 from threadpoolctl import threadpool_limits
 
@@ -26,9 +26,8 @@ from estimators.base import Estimator, SearchResult
 from estimators.options import finite_vector, positive_option
 from estimators.parameters import Parameterisation
 from estimators.problem import IdentificationProblem
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
-
-FloatArray = NDArray[np.float64]
 
 #: scipy's methods: ``trf`` (bounded trust-region reflective), ``dogbox`` (bounded), ``lm`` (MINPACK, unbounded)
 METHODS = ("trf", "dogbox", "lm")

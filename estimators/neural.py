@@ -65,10 +65,10 @@ from threadpoolctl import threadpool_limits
 from estimators.base import Estimator, SearchResult
 from estimators.options import check_float, check_int
 from estimators.problem import IdentificationProblem
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.sim.sensors import SensorModel
 
-FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
 
 #: largest batch of particle-samples per ``problem.predict`` call while building the training set

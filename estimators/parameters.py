@@ -14,7 +14,7 @@ file. Three are provided:
 Search ranges (documented defaults, overridable with ``lower``/``upper``):
 
 * fuel: ``mdf`` in ``[0, 1.2 x usable fuel]`` and ``bf`` in ``+-1.25 x`` the tank box half-width of
-  :class:`~spaceid_gym.sim.mission.FuelSchedule` (wider than the mission's draws, so truths never sit
+  :class:`~spaceid_gym.mission.FuelSchedule` (wider than the mission's draws, so truths never sit
   on a bound);
 * base: mass ``+-50 %``, first moments ``+-0.5 r_g m`` (``r_g`` the radius of gyration), inertia
   entries about the origin ``+-50 %`` of the largest principal moment around the nominal;
@@ -29,16 +29,15 @@ from abc import ABC, abstractmethod
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
-from estimators.models.effects import EffectTerm
+from estimators.models.effect_base import EffectTerm
+from estimators.models.mass_effects import PAYLOAD_NAMES, TYPICAL_PAYLOAD_SIZE_M, payload_box
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.mission import FuelSchedule
 from spaceid_gym.physics.fuel import FUEL_PARAMETER_NAMES, base_params10_after_fuel, base_params10_fuel_jacobian
 from spaceid_gym.physics.inertia import PARAMS10_NAMES, RigidBodyInertia
 from spaceid_gym.robots import Robot
-from spaceid_gym.sim.mission import FuelSchedule
-
-FloatArray = NDArray[np.float64]
 
 
 class Parameterisation(ABC):
@@ -182,23 +181,19 @@ class PayloadParameters(Parameterisation):
     """``theta`` = 10 inertial parameters of a payload on the last link, about the last joint's origin, its frame."""
 
     name = "payload"
-    names = tuple(f"payload_{n}" for n in PARAMS10_NAMES)
+    names = PAYLOAD_NAMES
 
     def __init__(
         self,
         robot: Robot,
         payload_max_kg: float | None = None,
-        payload_size_m: float = 0.5,
+        payload_size_m: float = TYPICAL_PAYLOAD_SIZE_M,
         lower: FloatArray | None = None,
         upper: FloatArray | None = None,
     ) -> None:
         self.base10 = robot.base_full.to_params10()
-        m_max = robot.arm_mass_kg() if payload_max_kg is None else float(payload_max_kg)
-        if not (np.isfinite(m_max) and m_max > 0.0 and np.isfinite(payload_size_m) and payload_size_m > 0.0):
-            raise SpaceIdInputError("payload parameters: payload_max_kg and payload_size_m must be positive numbers")
-        h, j = m_max * payload_size_m, m_max * payload_size_m**2
-        default_lower = np.array([0.0, -h, -h, -h, 0.0, -j, 0.0, -j, -j, 0.0])
-        default_upper = np.array([m_max, h, h, h, 2 * j, j, 2 * j, j, j, 2 * j])
+        m_max = robot.arm_mass_kg() if payload_max_kg is None else payload_max_kg
+        default_lower, default_upper = payload_box(m_max, payload_size_m)
         super().__init__(np.zeros(10), default_lower if lower is None else lower, default_upper if upper is None else upper)
 
     def composite(self, theta: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -221,7 +216,7 @@ class WithEffects(Parameterisation):
     """A parameterisation extended by effect terms: ``theta = [theta_base, theta_effect_1, ...]``.
 
     The effects' unknowns follow the base parameterisation's, in the order given (see
-    :mod:`estimators.models.effects` for each term's unknowns and ranges). A ``payload`` effect supplies the
+    :mod:`estimators.models.effect_models` for each term's unknowns and ranges). A ``payload`` effect supplies the
     payload parameters of the composite.
 
     Args:

@@ -27,16 +27,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from estimators.estimate import Estimate
-from estimators.models.effects import EffectContext, EffectPrediction, make_terms, parse_effects
+from estimators.models.effect_models import EffectContext, EffectPrediction, make_terms, parse_effects
 from estimators.models.momentum_model import MomentumModel, Samples
 from estimators.parameters import FuelParameters, Parameterisation, WithEffects, make_parameterisation
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.effects import remaining_liquid_kg
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.information import cramer_rao_std
 from spaceid_gym.log import MeasurementLog
 from spaceid_gym.robots import Robot, load_robot
-
-FloatArray = NDArray[np.float64]
 
 #: a parameter is identifiable if its Cramér-Rao std is below this fraction of its search range
 IDENTIFIABLE_FRACTION = 0.25
@@ -54,7 +53,7 @@ class IdentificationModel:
         noise_std_rad_s: gyro noise std per sample and axis (rad/s) for the Cramér-Rao bound;
             ``None`` estimates it from the final residual (``sqrt(RSS / (3T - k))``).
         effects: effect terms added to the model, e.g. ``"initial_momentum,gyro_bias"`` or a list of names
-            (see :mod:`estimators.models.effects`); their unknowns follow the parameterisation's.
+            (see :mod:`estimators.models.effect_models`); their unknowns follow the parameterisation's.
         **param_options: options of the parameterisation (``lower``, ``upper``, ...: for the whole vector,
             effects included).
     """
@@ -154,7 +153,7 @@ _CONTEXTS: weakref.WeakKeyDictionary[MeasurementLog, EffectContext] = weakref.We
 
 
 def _effect_context(log: MeasurementLog) -> EffectContext:
-    """:meth:`~estimators.models.effects.EffectContext.from_log`, computed once per log and
+    """:meth:`~estimators.models.effect_models.EffectContext.from_log`, computed once per log and
     shared by every problem on it (its arrays read-only, as the log's)."""
     context = _CONTEXTS.get(log)
     if context is None:
@@ -352,7 +351,7 @@ class IdentificationProblem:
         """Cramér-Rao standard deviations (k,) at ``theta``; ``inf`` in directions the log does not inform.
 
         ``extra_information`` (k, k): the Fisher information of a further measurement of the same log fitted
-        together with the gyro (the star tracker's, :meth:`~estimators.models.attitude_channel.AttitudeChannel.fisher`).
+        together with the gyro (the star tracker's, :meth:`~estimators.attitude_channel.AttitudeChannel.fisher`).
         """
         return cramer_rao_std(self._range_scaled_fisher(theta, noise_std_rad_s, extra_information)) * self.parameters.width
 

@@ -37,7 +37,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-FloatArray = NDArray[np.float64]
+from spaceid_gym.arrays import FloatArray
+
 IntArray = NDArray[np.intp]
 
 #: fitted points per coefficient of the second-order model (least squares, not interpolation)

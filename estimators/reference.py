@@ -26,16 +26,14 @@ from typing import Any, ClassVar
 from unittest import mock
 
 import numpy as np
-from numpy.typing import NDArray
 from scipy.optimize import differential_evolution
 from scipy.stats import qmc
 
 from estimators.base import Estimator, SearchResult
 from estimators.options import positive_option
 from estimators.problem import IdentificationProblem
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
-
-FloatArray = NDArray[np.float64]
 
 #: the mutation strategies of :func:`scipy.optimize.differential_evolution`
 DE_STRATEGIES = (

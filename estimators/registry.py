@@ -1,4 +1,9 @@
-"""Estimators by name: ``make_estimator("improved-pso", seed=1)``; users add their own with :func:`register_estimator`."""
+"""Estimators by name: ``make_estimator("improved-pso", seed=1)``; users add their own with :func:`register_estimator`.
+
+The table starts empty here; :mod:`estimators.builtin` fills it with the shipped estimators, and importing the
+package :mod:`estimators` imports that module, so the shipped names are there whatever module a user imports first.
+This module imports no estimator, so an estimator may itself resolve a name (``hybrid``'s global search does).
+"""
 
 from __future__ import annotations
 
@@ -22,7 +27,6 @@ def register_estimator(name: str, factory: Callable[..., Estimator], *, overwrit
 
 def available_estimators() -> list[str]:
     """Names of the registered estimators."""
-    _register_builtins()
     return sorted(_FACTORIES)
 
 
@@ -30,18 +34,9 @@ def make_estimator(name: str | Estimator, **options: Any) -> Estimator:
     """The estimator registered as ``name`` built with ``options`` (an :class:`Estimator` is returned as is)."""
     if isinstance(name, Estimator):
         return name
-    _register_builtins()
     if name not in _FACTORIES:
         raise SpaceIdInputError(f"unknown estimator {name!r}; available: {', '.join(sorted(_FACTORIES))}")
     try:
         return _FACTORIES[name](**options)
     except TypeError as exc:
         raise SpaceIdInputError(f"estimator {name!r}: bad options {options}: {exc}") from None
-
-
-def _register_builtins() -> None:
-    """Register the shipped estimators (imported lazily: they pull in optional libraries)."""
-    from estimators.builtin import builtin_estimators
-
-    for name, factory in builtin_estimators().items():
-        _FACTORIES.setdefault(name, factory)  # a user's registration under the same name wins

@@ -37,9 +37,9 @@ from numpy.typing import NDArray
 
 from estimators.base import Estimator
 from estimators.options import check_float, check_int
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 
-FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
 Inertia = float | tuple[float, float]
 

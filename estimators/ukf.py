@@ -42,7 +42,7 @@ tempered fit of the first window; not measured yet).
 Measured limits (paper6, 60 s windows at 50 Hz, known gyro noise): with mdf 60 kg and the tank at (0.25, -0.2,
 0.1) m the fit is consistent (``tests/test_ukf.py``: mean NEES of 8 seeds within its chi-square 99 % bounds, RMS
 fuel error 1.2 Cramér-Rao std). It is a local method, though: with the truth drawn as a mission draws it (tank
-anywhere in :class:`~spaceid_gym.sim.mission.FuelSchedule`'s box, mdf 20-130 kg) it ended far from the truth on 8
+anywhere in :class:`~spaceid_gym.mission.FuelSchedule`'s box, mdf 20-130 kg) it ended far from the truth on 8
 of 10 windows, mostly at ``mdf = 0`` (the lower bound, where the tank position has no effect), where ``lm`` from
 the same start found the truth; more passes did not help, and a start at ``lm``'s estimate left 5 of 10
 windows inconsistent (NEES > 100). Until that is solved it does not replace ``hybrid`` on a window whose state
@@ -65,15 +65,14 @@ from typing import Any, ClassVar
 
 import numpy as np
 from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from estimators.base import Estimator, SearchResult
 from estimators.least_squares import interior_start
 from estimators.options import check_bool, check_float, finite_vector, positive_option
 from estimators.problem import IdentificationProblem
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
-
-FloatArray = NDArray[np.float64]
 
 #: third differences of white noise of std sigma have std ``sqrt(20) sigma`` (binomial coefficients 1, 3, 3, 1)
 THIRD_DIFFERENCE_GAIN = float(np.sqrt(20.0))

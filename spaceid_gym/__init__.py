@@ -1,6 +1,8 @@
 """spaceid-gym: identify the inertial parameters of robots from their own motion data.
 
-Importing the package registers the Gymnasium environment ``FreeFloatingID-v0``.
+Importing the package registers the Gymnasium environments ``FreeFloatingID-v0`` and ``ManipulatorID-v0``.
+``FreeFloatingID-v0`` is built by :func:`spaceid_gym.envs.estimation.make_free_floating_env` (the physics env, wrapped
+in the estimator hook when ``estimator=`` is given).
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ __all__ = ["Robot", "SpaceIdInputError", "__version__", "available_robots", "loa
 if "FreeFloatingID-v0" not in registry:
     register(
         id="FreeFloatingID-v0",
-        entry_point="spaceid_gym.envs.free_floating:FreeFloatingIDEnv",
+        entry_point="spaceid_gym.envs.estimation:make_free_floating_env",  # a string: this package imports no estimator
         max_episode_steps=WINDOW_STEPS,
     )
 if "ManipulatorID-v0" not in registry:

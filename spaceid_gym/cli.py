@@ -16,18 +16,47 @@ from pathlib import Path
 
 import numpy as np
 
-from spaceid_gym.arm.cli_commands import (
+from estimators.diagnostics.compare import compare, model_from_estimate
+from estimators.diagnostics.plots import plot_correlations, plot_overlay, plot_residuals
+from estimators.diagnostics.suite import (
+    DIAGNOSTIC_EXCITATION,
+    SUITE_EFFECTS,
+    code_version,
+    failed_rows,
+    parse_magnitudes,
+    run_matrix,
+    run_suite,
+    write_matrix,
+    write_suite,
+)
+from estimators.diagnostics.workflow import apply_effect, run_loop, write_report
+from estimators.evaluation import (
+    draw_settings,
+    estimator_from_spec,
+    parse_estimator_specs,
+    run_evaluation,
+    settings_info,
+    write_results,
+)
+from estimators.problem import IdentificationModel
+from spaceid_gym.arm_cli import (
     ARM_COMMANDS,
     add_arm_cross_validate_arguments,
     add_arm_diagnose_arguments,
     add_arm_identify_arguments,
     add_arm_simulate_arguments,
 )
+from spaceid_gym.datasets import simulate_episode, write_episode_dataset
+from spaceid_gym.demo import run_demo
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.excitation import FourierExcitation
+from spaceid_gym.files import write_json_atomic
 from spaceid_gym.limits import check_count, check_log_size, max_jobs
+from spaceid_gym.log import MeasurementLog
+from spaceid_gym.mission import FuelSchedule
+from spaceid_gym.robots import load_robot
 from spaceid_gym.sim.sensors import ARCSEC_RAD, ATTITUDE_SOURCES, SensorModel
-from spaceid_gym.variations import AXIS_VALUES
+from spaceid_gym.variations import AXIS_RANGES, AXIS_VALUES, parse_fixed
 
 
 def _vector3(text: str) -> np.ndarray:
@@ -239,8 +268,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         elif args.command == "arm":
             ARM_COMMANDS[args.arm_command](args)
         elif args.command == "demo":
-            from spaceid_gym.demo import run_demo
-
             run_demo(args.out, args.robot, args.seed)
     except (SpaceIdInputError, OSError) as exc:
         print(f"spaceid: error: {exc}", file=sys.stderr)
@@ -252,10 +279,6 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _simulate(args: argparse.Namespace) -> None:
-    from spaceid_gym.datasets import simulate_episode, write_episode_dataset
-    from spaceid_gym.robots import load_robot
-    from spaceid_gym.sim.mission import FuelSchedule
-
     if not (np.isfinite(args.rate) and args.rate > 0):
         raise SpaceIdInputError(f"--rate: expected a positive rate in Hz, got {args.rate!r}")
     sensors = _sensor_model(args)
@@ -316,11 +339,6 @@ def _sensor_model(args: argparse.Namespace) -> SensorModel:
 
 
 def _identify(args: argparse.Namespace) -> None:
-    from estimators.evaluation import estimator_from_spec
-    from estimators.problem import IdentificationModel
-    from spaceid_gym.log import MeasurementLog
-    from spaceid_gym.robots import load_robot
-
     robot = load_robot(args.robot)
     estimator = estimator_from_spec(args.estimator, seed=args.seed)
     bounds = {k: v for k, v in (("lower", args.lower), ("upper", args.upper)) if v is not None}
@@ -336,11 +354,6 @@ def _identify(args: argparse.Namespace) -> None:
 
 
 def _compare(args: argparse.Namespace) -> None:
-    from estimators.diagnostics.compare import compare, model_from_estimate
-    from estimators.diagnostics.plots import plot_correlations, plot_overlay, plot_residuals
-    from spaceid_gym.log import MeasurementLog, write_json_atomic
-    from spaceid_gym.robots import load_robot
-
     robot = load_robot(args.robot)
     model, theta = model_from_estimate(robot, args.estimate)
     log = MeasurementLog.from_csv(args.log, n_joints=robot.n_joints)
@@ -359,12 +372,6 @@ def _compare(args: argparse.Namespace) -> None:
 
 
 def _diagnose_or_report(args: argparse.Namespace) -> None:
-    from estimators.diagnostics.workflow import apply_effect, run_loop, write_report
-    from estimators.evaluation import estimator_from_spec
-    from estimators.problem import IdentificationModel
-    from spaceid_gym.log import MeasurementLog, write_json_atomic
-    from spaceid_gym.robots import load_robot
-
     robot = load_robot(args.robot)
     log = MeasurementLog.from_csv(args.log, n_joints=robot.n_joints)
     model = IdentificationModel(robot, args.params, effects=args.effects)
@@ -392,14 +399,6 @@ def _diagnose_or_report(args: argparse.Namespace) -> None:
 def _diagnose_suite(args: argparse.Namespace) -> int:
     """Runs the suite (or with ``--matrix`` the variation matrix) and writes it; exit code 1 (after writing) if the
     diagnosis of any log raised."""
-    from estimators.diagnostics.suite import (
-        DIAGNOSTIC_EXCITATION,
-        SUITE_EFFECTS,
-        parse_magnitudes,
-        run_suite,
-        write_suite,
-    )
-
     check_count(args.jobs, "--jobs", max_jobs())
     check_count(args.seeds, "--seeds")
     if args.first_seed < 0:
@@ -425,8 +424,6 @@ def _diagnose_suite(args: argparse.Namespace) -> int:
 
 def _timed_run(info: dict[str, object], run: Callable[[], list[dict[str, object]]]) -> list[dict[str, object]]:
     """``run()``'s rows; adds the code's version (read before it runs) and the wall time to ``info``."""
-    from estimators.diagnostics.suite import code_version
-
     start = time.perf_counter()
     info["code_version"] = code_version()
     rows = run()
@@ -437,9 +434,6 @@ def _timed_run(info: dict[str, object], run: Callable[[], list[dict[str, object]
 def _diagnose_matrix(args: argparse.Namespace, effects: tuple[str, ...], runs: dict[str, object]) -> int:
     """``diagnose-suite --matrix``: the variation matrix, written to ``--out`` (``runs``: the seeds, effects and
     duration, for ``summary.json``)."""
-    from estimators.diagnostics.suite import run_matrix, write_matrix
-    from spaceid_gym.variations import AXIS_RANGES, AXIS_VALUES, parse_fixed
-
     if args.robot is not None or args.magnitude is not None:
         raise SpaceIdInputError("--robot and --magnitude: not with --matrix, whose logs draw them (pin with --fix robot=...)")
     try:
@@ -453,8 +447,6 @@ def _diagnose_matrix(args: argparse.Namespace, effects: tuple[str, ...], runs: d
 
 def _report_suite(rows: list[dict[str, object]], paths: dict[str, Path], info: dict[str, object]) -> int:
     """Print the table and the logs that failed; exit code 1 if any did."""
-    from estimators.diagnostics.suite import failed_rows
-
     print(paths["table"].read_text())
     print(f"{len(rows)} logs in {info['wall_time_s']:.0f} s; wrote {', '.join(p.name for p in paths.values())}")
     failed = failed_rows(rows)
@@ -483,9 +475,6 @@ def _read_json(path: Path) -> dict:
 
 
 def _evaluate(args: argparse.Namespace) -> None:
-    from estimators.evaluation import draw_settings, parse_estimator_specs, run_evaluation, settings_info, write_results
-    from spaceid_gym.robots import load_robot
-
     check_count(args.settings, "--settings")
     check_count(args.jobs, "--jobs", max_jobs())
     robot = load_robot(args.robot)

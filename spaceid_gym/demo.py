@@ -30,6 +30,7 @@ from matplotlib.figure import Figure
 from estimators.diagnostics.suite import DIAGNOSTIC_EXCITATION
 from estimators.diagnostics.workflow import run_loop, write_report
 from estimators.problem import IdentificationModel
+from estimators.registry import make_estimator
 from spaceid_gym.datasets import simulate_episode, write_episode_dataset
 from spaceid_gym.effects import draw_effect
 from spaceid_gym.envs.render import RobotRenderer, base_half_extents_from_inertia
@@ -108,9 +109,6 @@ def run_demo(out: Path, robot_name: str = "paper6", seed: int = 3) -> dict[str, 
 
 def _identify(dataset: Dataset) -> dict[str, Any]:
     """Fit the default estimator on the dataset as a user would (URDF + log only) and hold it against the truth."""
-    from estimators.problem import IdentificationModel
-    from estimators.registry import make_estimator
-
     robot = robot_from_urdf_text(dataset.robot_urdf_path.read_text(), "robot.urdf")
     estimate = make_estimator("hybrid", seed=0).fit(IdentificationModel(robot, "fuel"), dataset.log)
     estimate.write_json(dataset.path / "estimate.json")

@@ -108,19 +108,18 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import re
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.mission import FuelSchedule
 from spaceid_gym.physics.inertia import RigidBodyInertia
 from spaceid_gym.robots.robot import Robot
-from spaceid_gym.sim.mission import FuelSchedule
-
-FloatArray = NDArray[np.float64]
+from spaceid_gym.specs import parse_setting, split_outside_brackets
 
 #: the catalogue's effect names (``gyro_scale``, the scale-factor/misalignment variant of ``gyro_bias``, last)
 EFFECT_NAMES = ("initial_momentum", "gyro_bias", "payload", "slosh", "delay", "external_torque", "gyro_scale")
@@ -520,21 +519,6 @@ def draw_slosh(
 
 
 # ---------------------------------------------------------------------- spec strings
-_ITEM = re.compile(r"\s*([A-Za-z_][A-Za-z0-9_]*)\s*(?:\[([^\[\]]*)\])?\s*$")
-
-
-def _split_top_level(spec: str) -> list[str]:
-    """Split at commas outside brackets."""
-    items, depth, start = [], 0, 0
-    for i, ch in enumerate(spec):
-        depth += (ch == "[") - (ch == "]")
-        if ch == "," and depth == 0:
-            items.append(spec[start:i])
-            start = i + 1
-    items.append(spec[start:])
-    return items
-
-
 def _parse_value(spec: str, name: str, key: str, text: str) -> float | str | FloatArray:
     if key == "slosh_model":
         if text not in SLOSH_MODELS:
@@ -570,13 +554,8 @@ def parse_effect_spec(spec: str) -> list[tuple[str, dict[str, Any]]]:
     if not isinstance(spec, str) or not spec.strip():
         raise SpaceIdInputError(f"hidden effects: expected a spec such as 'slosh,delay[delay_s=0.03]', got {spec!r}")
     out: list[tuple[str, dict[str, Any]]] = []
-    for item in _split_top_level(spec):
-        match = _ITEM.match(item)
-        if match is None:
-            raise SpaceIdInputError(
-                f"hidden effects '{spec}': cannot read {item.strip()!r}; expected name or name[key=value,...]"
-            )
-        name, options = match.group(1), match.group(2)
+    for item in split_outside_brackets(spec, f"hidden effects '{spec}'"):
+        name, options = parse_setting(item, f"hidden effects '{spec}'")
         if name not in EFFECT_NAMES:
             raise SpaceIdInputError(
                 f"hidden effects '{spec}': unknown effect '{name}'; expected one of {', '.join(EFFECT_NAMES)}"
@@ -585,7 +564,7 @@ def parse_effect_spec(spec: str) -> list[tuple[str, dict[str, Any]]]:
             raise SpaceIdInputError(f"hidden effects '{spec}': effect '{name}' given twice")
         valid = ("magnitude", *EFFECT_FIELDS[name])
         settings: dict[str, Any] = {}
-        for pair in [] if options is None or not options.strip() else options.split(","):
+        for pair in options or []:
             key, sep, text = (part.strip() for part in pair.partition("="))
             if not sep or key not in valid:
                 raise SpaceIdInputError(

@@ -9,9 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
-from numpy.typing import NDArray
 
-FloatArray = NDArray[np.float64]
+from spaceid_gym.arrays import FloatArray
 
 
 def fisher_information(jacobians: FloatArray, noise_std: float) -> FloatArray:

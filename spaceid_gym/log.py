@@ -10,8 +10,8 @@ and, optionally, the base attitude. It is stored as a CSV file with the header
 with ``repr`` so a write/read round trip is bit exact.
 
 A dataset folder holds ``log.csv``, ``robot.urdf`` and, for simulated data, ``truth.json``
-(:func:`write_dataset`, :func:`load_dataset`). Every file is written atomically (temporary file in
-the same directory, then ``os.replace``), so a failure never leaves a half-written file.
+(:func:`write_dataset`, :func:`load_dataset`). Every file is written atomically (:mod:`spaceid_gym.files`:
+temporary file in the same directory, then ``os.replace``), so a failure never leaves a half-written file.
 
 Every input problem raises :class:`~spaceid_gym.errors.SpaceIdInputError` naming the file, the
 column and the row.
@@ -20,24 +20,27 @@ column and the row.
 from __future__ import annotations
 
 import csv
-import io
 import json
-import math
-import os
-import secrets
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager, suppress
+from collections.abc import Callable
+from contextlib import suppress
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 
-FloatArray = NDArray[np.float64]
-PathLike = str | os.PathLike[str]
+# the atomic writes live in spaceid_gym.files; re-exported here for code written against their first home
+from spaceid_gym.files import PathLike as PathLike
+from spaceid_gym.files import atomic_open as atomic_open
+from spaceid_gym.files import json_value
+from spaceid_gym.files import write_bytes_atomic as write_bytes_atomic
+from spaceid_gym.files import write_csv_atomic as write_csv_atomic
+from spaceid_gym.files import write_json_atomic as write_json_atomic
+from spaceid_gym.files import write_text_atomic as write_text_atomic
+from spaceid_gym.robots import load_robot
 
 LOG_FILENAME = "log.csv"
 URDF_FILENAME = "robot.urdf"
@@ -141,7 +144,7 @@ def _check_arrays(
 class JointTimeSeries:
     """What every log of joint measurements has: sample times ``t_s`` (T,) and joint angles ``q_rad`` (T, n).
 
-    Shared by :class:`MeasurementLog` and :class:`spaceid_gym.arm.log.ArmLog` (frozen dataclasses).
+    Shared by :class:`MeasurementLog` and :class:`spaceid_gym.arm.joint_log.ArmLog` (frozen dataclasses).
     """
 
     t_s: FloatArray
@@ -447,64 +450,6 @@ def _parse_header(path: Path, header: list[str], line: int) -> tuple[int, bool]:
     )
 
 
-# ---------------------------------------------------------------------- atomic writes
-@contextmanager
-def atomic_open(path: PathLike, binary: bool = False) -> Iterator[Any]:
-    """Open a temporary file next to ``path`` for writing (text UTF-8, or ``binary``); on success rename it over ``path``.
-
-    On any exception the temporary file is removed and ``path`` keeps its previous content (or stays
-    absent); a missing or unwritable folder raises :class:`SpaceIdInputError`.
-    """
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
-    try:
-        f = open(tmp, "xb") if binary else open(tmp, "x", encoding="utf-8", newline="\n")  # noqa: SIM115 - closed below
-    except OSError as exc:
-        raise SpaceIdInputError(f"{path}: cannot write: {exc.strerror}") from exc
-    try:
-        with f:
-            yield f
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        with suppress(OSError):
-            tmp.unlink()
-        raise
-
-
-def write_text_atomic(path: PathLike, text: str) -> Path:
-    """Write ``text`` to ``path`` atomically (a temporary file renamed into place)."""
-    with atomic_open(path) as f:
-        f.write(text)
-    return Path(path)
-
-
-def write_bytes_atomic(path: PathLike, data: bytes) -> Path:
-    """Write ``data`` to ``path`` atomically (a temporary file renamed into place), creating its folder."""
-    try:
-        Path(path).parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise SpaceIdInputError(f"{path}: cannot write: cannot create its folder ({exc.strerror})") from exc
-    with atomic_open(path, binary=True) as f:
-        f.write(data)
-    return Path(path)
-
-
-def write_csv_atomic(path: PathLike, rows: list[dict[str, Any]]) -> Path:
-    """Write dict rows (columns: the first row's keys) as CSV to ``path`` atomically."""
-    text = io.StringIO()
-    writer = csv.DictWriter(text, fieldnames=list(rows[0]), lineterminator="\n")
-    writer.writeheader()
-    writer.writerows(rows)
-    return write_text_atomic(path, text.getvalue())
-
-
-def write_json_atomic(path: PathLike, data: dict[str, Any]) -> Path:
-    """Write ``data`` as indented JSON to ``path`` atomically (numpy arrays and scalars become lists and numbers, NaN null)."""
-    return write_text_atomic(path, json.dumps(_to_json(data, "", nonfinite_as_null=True), indent=2) + "\n")
-
-
 # ---------------------------------------------------------------------- dataset folders
 @dataclass
 class Dataset:
@@ -523,37 +468,6 @@ class Dataset:
     path: Path
 
 
-def _to_json(value: Any, where: str, nonfinite_as_null: bool = False) -> Any:
-    """``value`` with numpy arrays/scalars (and tuples, paths) turned into plain JSON types.
-
-    A non-finite float is an error, or ``None`` with ``nonfinite_as_null`` (a figure that does not exist).
-    """
-    if isinstance(value, np.ndarray):
-        return _to_json(value.tolist(), where, nonfinite_as_null)
-    if isinstance(value, np.generic):
-        return _to_json(value.item(), where, nonfinite_as_null)
-    if value is None or isinstance(value, (bool, int, str)):
-        return value
-    if isinstance(value, float):
-        if not math.isfinite(value):
-            if nonfinite_as_null:
-                return None
-            raise SpaceIdInputError(f"truth{where}: {value!r} cannot be written to JSON; expected a finite number")
-        return value
-    if isinstance(value, dict):
-        out = {}
-        for key, item in value.items():
-            if not isinstance(key, str):
-                raise SpaceIdInputError(f"truth{where}: key {key!r} must be a string")
-            out[str(key)] = _to_json(item, f"{where}[{str(key)!r}]", nonfinite_as_null)
-        return out
-    if isinstance(value, (list, tuple)):
-        return [_to_json(item, f"{where}[{i}]", nonfinite_as_null) for i, item in enumerate(value)]
-    if isinstance(value, os.PathLike):
-        return os.fspath(value)
-    raise SpaceIdInputError(f"truth{where}: cannot write a {type(value).__name__} to JSON")
-
-
 def write_dataset(directory: PathLike, log: MeasurementLog, urdf_text: str, truth: dict[str, Any] | None = None) -> Path:
     """Write a dataset folder (created with parents if needed); every file is written atomically.
 
@@ -569,7 +483,7 @@ def write_dataset(directory: PathLike, log: MeasurementLog, urdf_text: str, trut
         The folder as a :class:`~pathlib.Path`.
     """
     directory = Path(directory)
-    truth_text = None if truth is None else json.dumps(_to_json(truth, ""), indent=2, sort_keys=True) + "\n"
+    truth_text = None if truth is None else json.dumps(json_value(truth, ""), indent=2, sort_keys=True) + "\n"
     if directory.exists() and not directory.is_dir():
         raise SpaceIdInputError(f"{directory}: exists and is not a folder; cannot write a dataset there")
     try:
@@ -610,8 +524,6 @@ def load_dataset(directory: PathLike, n_joints: int | None = None) -> Dataset:
                 f"{directory / name}: file not found; a dataset folder needs {LOG_FILENAME} and {URDF_FILENAME}"
             )
     if n_joints is None:  # the log must fit the robot it comes with
-        from spaceid_gym.robots import load_robot
-
         n_joints = load_robot(directory / URDF_FILENAME).n_joints
     log = MeasurementLog.from_csv(directory / LOG_FILENAME, n_joints=n_joints)
     truth_path = directory / TRUTH_FILENAME

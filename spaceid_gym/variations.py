@@ -29,7 +29,7 @@ along a thruster's axis, which need not be a base axis) and is 0.1-1 m long (log
 effect's generator (they are the effect's geometry, as the other effects' directions are).
 
 The fuel state is drawn as in the evaluation harness (``estimators.evaluation.draw_settings``, which this lower
-layer does not import): fuel consumed uniform between :class:`~spaceid_gym.sim.mission.FuelSchedule`'s
+layer does not import): fuel consumed uniform between :class:`~spaceid_gym.mission.FuelSchedule`'s
 ``initial_fraction`` and ``usable_fraction`` of the robot's full-tank base mass, tank position uniform in its box;
 both as fractions drawn before the robot is known, so that pinning the robot leaves them (and every other axis) as
 drawn. Every axis is drawn on every case in a fixed order, whatever the effect and whatever is pinned; the effect's
@@ -65,8 +65,8 @@ from spaceid_gym.effects import (
 from spaceid_gym.envs.free_floating import FreeFloatingIDEnv
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.excitation import FourierExcitation, SmoothRandomExcitation
+from spaceid_gym.mission import FuelSchedule
 from spaceid_gym.robots import load_robot
-from spaceid_gym.sim.mission import FuelSchedule
 from spaceid_gym.sim.sensors import ARCSEC_RAD, SensorModel
 
 #: the second entry of the seed of :func:`draw_variation`'s generator (``default_rng([seed, VARIATION_STREAM])``),

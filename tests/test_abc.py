@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from estimators.abc import ArtificialBeeColony, Colony, ImprovedABC
-from estimators.consistency import is_physically_consistent
-from estimators.linear_ls import OrdinaryLeastSquares, WeightedLeastSquares
-from estimators.linear_problem import LinearIdentificationProblem
+from estimators.arm.consistency import is_physically_consistent
+from estimators.arm.improved_abc import ArtificialBeeColony, Colony, ImprovedABC
+from estimators.arm.linear_ls import OrdinaryLeastSquares, WeightedLeastSquares
+from estimators.arm.linear_problem import LinearIdentificationProblem
+from estimators.arm.synthetic import ArmBenchmark, arm_benchmark, last_link_problem
 from estimators.problem import IdentificationModel
-from estimators.synthetic_arm import ArmBenchmark, arm_benchmark, last_link_problem
 from spaceid_gym.errors import SpaceIdInputError
 
 ESTIMATORS = [pytest.param(ArtificialBeeColony, id="abc"), pytest.param(ImprovedABC, id="improved-abc")]

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from spaceid_gym.arm import ArmRegressor, BaseParameterSet, load_arm
-from spaceid_gym.arm.excitation import (
+from spaceid_gym.arm.excitation_design import (
     FourierTrajectory,
     _Criterion,
     optimise_excitation,

@@ -10,7 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from estimators.arm_identification import (
+from estimators.arm.consistency import params10_from_pseudo_inertia, pseudo_inertia
+from estimators.arm.diagnose import diagnose_arm, where_it_fails
+from estimators.arm.identification import (
     Preparation,
     fit,
     joint_weighted,
@@ -21,16 +23,14 @@ from estimators.arm_identification import (
     processed_noise_floor,
     summary_table,
 )
-from estimators.consistency import params10_from_pseudo_inertia, pseudo_inertia
-from estimators.diagnostics.arm_diagnose import diagnose_arm, where_it_fails
+from estimators.arm.linear_problem import LinearIdentificationProblem
+from estimators.arm.model import ArmIdentificationModel
+from estimators.arm.synthetic import last_link_problem
 from estimators.evaluation import estimator_from_spec
-from estimators.linear_problem import LinearIdentificationProblem
-from estimators.models.arm_model import ArmIdentificationModel
-from estimators.synthetic_arm import last_link_problem
 from spaceid_gym.arm.datasets import simulate_arm_dataset
 from spaceid_gym.arm.robot import load_arm
 from spaceid_gym.arm.signal import lowpass_zero_phase, prepare_for_identification
-from spaceid_gym.arm.simulator import ArmSensorModel
+from spaceid_gym.arm.torque_simulator import ArmSensorModel
 from spaceid_gym.cli import main
 from spaceid_gym.errors import SpaceIdInputError
 

@@ -9,15 +9,13 @@ import numpy as np
 import pytest
 
 from agents.excitation import FourierExcitation
+from estimators.attitude_channel import AttitudeChannel, AttitudeNoise
 from estimators.diagnostics.compare import compare, model_from_estimate
 from estimators.diagnostics.diagnose import (
     NO_MISSING_EFFECT,
     UNEXPLAINED,
     ChannelWeights,
     ModelFit,
-    _prefer_encompassing,
-    _score,
-    _scored,
     _verdict,
     candidate_model,
     diagnose,
@@ -25,9 +23,10 @@ from estimators.diagnostics.diagnose import (
     fit_model,
     nested_p_value,
 )
+from estimators.diagnostics.model_fit import _scored
 from estimators.diagnostics.suite import DIAGNOSTIC_EXCITATION
+from estimators.diagnostics.verdict import _prefer_encompassing, _score
 from estimators.diagnostics.workflow import parameter_errors, run_loop, write_report
-from estimators.models.attitude_channel import AttitudeChannel, AttitudeNoise
 from estimators.problem import IdentificationModel
 from estimators.registry import make_estimator
 from spaceid_gym.datasets import simulate_episode

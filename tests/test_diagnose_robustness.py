@@ -16,16 +16,16 @@ import pytest
 from scipy.stats import chi2
 
 from agents.excitation import FourierExcitation
-from estimators.diagnostics.diagnose import NO_MISSING_EFFECT, attitude_gyro_dependence, diagnose, low_frequency_p_value
-from estimators.diagnostics.suite import DIAGNOSTIC_EXCITATION
-from estimators.diagnostics.workflow import true_parameters
-from estimators.models.attitude_channel import (
+from estimators.attitude_channel import (
     AttitudeChannel,
     AttitudeNoise,
     _negative_log_likelihood,
     fit_attitude_noise,
     truncation_shape,
 )
+from estimators.diagnostics.diagnose import NO_MISSING_EFFECT, attitude_gyro_dependence, diagnose, low_frequency_p_value
+from estimators.diagnostics.suite import DIAGNOSTIC_EXCITATION
+from estimators.diagnostics.workflow import true_parameters
 from estimators.problem import IdentificationModel
 from spaceid_gym.datasets import simulate_episode
 from spaceid_gym.log import MeasurementLog

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from agents.excitation import FourierExcitation
-from estimators.models.attitude_channel import AttitudeChannel, midpoint_log
-from estimators.models.effects import DELAY_BAND_HZ, EFFECT_TERMS, make_terms, parse_effects
+from estimators.attitude_channel import AttitudeChannel, midpoint_log
+from estimators.models.effect_models import DELAY_BAND_HZ, EFFECT_TERMS, make_terms, parse_effects
 from estimators.models.fractional_delay import delay_samples
 from estimators.problem import IdentificationModel
 from spaceid_gym.datasets import simulate_episode

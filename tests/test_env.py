@@ -10,7 +10,7 @@ from gymnasium.utils.env_checker import check_env
 import spaceid_gym  # noqa: F401  (registers the env)
 from spaceid_gym.envs import FreeFloatingIDEnv
 from spaceid_gym.information import log_det
-from spaceid_gym.sim.mission import FuelSchedule
+from spaceid_gym.mission import FuelSchedule
 
 
 def _rollout(env: gym.Env, seed: int, steps: int) -> tuple[np.ndarray, list[float]]:

@@ -13,6 +13,8 @@ import pytest
 
 from estimators.evaluation import estimator_from_spec, parse_estimator_specs
 from spaceid_gym.cli import main
+from spaceid_gym.envs import FreeFloatingIDEnv
+from spaceid_gym.envs.estimation import EstimatorWrapper
 from spaceid_gym.errors import SpaceIdInputError
 
 TRUTH_KEYS = ("base_mass_kg", "base_com_m", "base_inertia_kgm2", "fuel_consumed_kg", "tank_position_m")
@@ -148,9 +150,7 @@ def test_env_runs_the_estimator_at_the_window_end() -> None:
 
 
 def test_env_rejects_a_bad_window_and_an_unknown_estimator() -> None:
-    from spaceid_gym.envs import FreeFloatingIDEnv
-
     with pytest.raises(SpaceIdInputError, match="identify_after_steps: expected a positive number of steps"):
-        FreeFloatingIDEnv("quick3", estimator="lm", identify_after_steps=0)
+        EstimatorWrapper(FreeFloatingIDEnv("quick3"), "lm", identify_after_steps=0)
     with pytest.raises(SpaceIdInputError, match="unknown estimator 'simplex'"):
-        FreeFloatingIDEnv("quick3", estimator="simplex")
+        EstimatorWrapper(FreeFloatingIDEnv("quick3"), "simplex")

@@ -15,7 +15,7 @@ import pinocchio as pin
 import pytest
 from scipy.stats import chi2
 
-from estimators.consistency import (
+from estimators.arm.consistency import (
     PhysicalConsistency,
     is_physically_consistent,
     log_cholesky_to_params10,
@@ -23,9 +23,9 @@ from estimators.consistency import (
     params10_to_log_cholesky,
     pseudo_inertia,
 )
-from estimators.linear_ls import OrdinaryLeastSquares, WeightedLeastSquares
-from estimators.linear_problem import LinearIdentificationProblem
-from estimators.synthetic_arm import (
+from estimators.arm.linear_ls import OrdinaryLeastSquares, WeightedLeastSquares
+from estimators.arm.linear_problem import LinearIdentificationProblem
+from estimators.arm.synthetic import (
     FRICTION_TRUE,
     N_JOINTS,
     NOISE_STD,

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import spaceid_gym.files as files_module
 import spaceid_gym.log as log_module
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.log import Dataset, MeasurementLog, load_dataset, write_dataset
@@ -262,7 +263,7 @@ def test_failed_rename_leaves_no_temp(tmp_path: Path, monkeypatch: pytest.Monkey
     def failing_replace(src: object, dst: object) -> None:
         raise OSError("rename failed")
 
-    monkeypatch.setattr(log_module.os, "replace", failing_replace)
+    monkeypatch.setattr(files_module.os, "replace", failing_replace)
     with pytest.raises(OSError, match="rename failed"):
         make_log().to_csv(tmp_path / "log.csv")
     assert list(tmp_path.iterdir()) == []

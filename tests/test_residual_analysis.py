@@ -374,3 +374,14 @@ def test_analysis_rejects_bad_input_with_named_messages() -> None:
         analyse_residuals(t, y_bad, y, q, dq)
     with pytest.raises(SpaceIdInputError, match="dq"):
         analyse_residuals(t, y, y, q, dq[:50])
+
+
+def test_noise_floor_uses_scipy_mad_with_the_hand_written_result() -> None:
+    """scipy's median_abs_deviation replaced ``median(|d - median(d)|)``: the same numbers, bit for bit."""
+    rng = np.random.default_rng(7)
+    for rows in (5, 64, 3001):
+        residual = rng.standard_t(3, size=(rows, 3)) + np.linspace(0.0, 1.0, rows)[:, None]
+        d = np.diff(residual, n=2, axis=0)
+        mad = np.median(np.abs(d - np.median(d, axis=0)), axis=0)
+        expected = mad * (1.0 / float(stats.norm.ppf(0.75))) / math.sqrt(math.comb(4, 2))
+        np.testing.assert_array_equal(noise_floor_std(residual), expected)

@@ -12,10 +12,10 @@ import pytest
 
 from spaceid_gym.cli import main
 from spaceid_gym.log import load_dataset
+from spaceid_gym.mission import FuelSchedule
 from spaceid_gym.physics.fuel import base_after_fuel
 from spaceid_gym.physics.momentum import base_rate_from_joint_motion
 from spaceid_gym.robots import Robot, available_robots, load_robot
-from spaceid_gym.sim.mission import FuelSchedule
 from spaceid_gym.sim.simulator import FreeFloatingSimulator, FreeFloatingState
 
 DT_S = 0.02

@@ -2,7 +2,7 @@
 
 References independent of the code under test: the simulator's exact torques (noise-free recovery), WLS's closed form
 (the equal-cost case), the textbook checks of a body (principal moments about the CoM, triangle inequalities:
-:func:`~estimators.consistency.satisfies_triangle_inequalities`, :meth:`RigidBodyInertia.validate`) for the matrix
+:func:`~estimators.arm.consistency.satisfies_triangle_inequalities`, :meth:`RigidBodyInertia.validate`) for the matrix
 inequality, and a point-mass construction of the pseudo-inertia.
 """
 
@@ -12,22 +12,22 @@ import cvxpy as cp
 import numpy as np
 import pytest
 
-from estimators.consistency import (
+from estimators.arm.consistency import (
     PhysicalConsistency,
     is_physically_consistent,
     principal_moments_about_com,
     pseudo_inertia,
     satisfies_triangle_inequalities,
 )
+from estimators.arm.linear_ls import WeightedLeastSquares, group_weighted
+from estimators.arm.linear_problem import LinearIdentificationProblem
+from estimators.arm.model import ArmIdentificationModel, IdentificationRows
+from estimators.arm.sdp import SemidefiniteLeastSquares, consistent_optimum
+from estimators.arm.synthetic import arm_benchmark, last_link_problem
 from estimators.evaluation import estimator_from_spec
-from estimators.linear_ls import WeightedLeastSquares, group_weighted
-from estimators.linear_problem import LinearIdentificationProblem
-from estimators.models.arm_model import ArmIdentificationModel, IdentificationRows
-from estimators.sdp import SemidefiniteLeastSquares, consistent_optimum
-from estimators.synthetic_arm import arm_benchmark, last_link_problem
 from spaceid_gym.arm.datasets import simulate_arm_dataset
 from spaceid_gym.arm.robot import load_arm
-from spaceid_gym.arm.simulator import ArmSensorModel
+from spaceid_gym.arm.torque_simulator import ArmSensorModel
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.physics.inertia import RigidBodyInertia
 

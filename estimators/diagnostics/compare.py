@@ -18,15 +18,13 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from estimators.diagnostics.residuals import ResidualAnalysis, analyse_residuals
 from estimators.problem import IdentificationModel
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.log import MeasurementLog
 from spaceid_gym.robots import Robot
-
-FloatArray = NDArray[np.float64]
 
 
 @dataclass

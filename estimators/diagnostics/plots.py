@@ -23,15 +23,15 @@ from scipy import stats
 
 from estimators.diagnostics.report import PathLike
 from estimators.diagnostics.residuals import (
-    FloatArray,
     ResidualAnalysis,
     Segment,
     SpectralPeak,
     periodogram,
     white_spectrum_level,
 )
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
-from spaceid_gym.log import write_bytes_atomic
+from spaceid_gym.files import write_bytes_atomic
 
 _SEGMENT_COLOUR = "tab:red"
 _DPI = 100

@@ -3,7 +3,7 @@
 On a simulated log with one effect hidden, the Fisher information of the candidate model (the model's unknowns
 plus the effect's) at the true parameters, from the gyro (white noise of the per-sample std recorded in the
 truth's sensor settings, ``truth["noise"]["gyro_std_rad_s"]`` as in truth.json) and, when the log has an attitude
-source, from the attitude channel (:class:`~estimators.models.attitude_channel.AttitudeChannel`, its error model
+source, from the attitude channel (:class:`~estimators.attitude_channel.AttitudeChannel`, its error model
 fitted at the truth, as ``diagnose`` fits it). With the model's own unknowns free, the effect's likelihood ratio is
 non-central chi-square with ``k_e`` degrees of freedom (the effect's unknowns) and non-centrality
 ``lambda = d^T S d``: ``S`` the Schur complement of the effect's block (the information left once the other unknowns
@@ -29,9 +29,9 @@ from typing import Any
 import numpy as np
 from scipy.stats import chi2, ncx2
 
+from estimators.attitude_channel import AttitudeChannel
 from estimators.diagnostics.diagnose import DEFAULT_CANDIDATES, attitude_gyro_dependence, candidate_model
 from estimators.diagnostics.workflow import true_parameters
-from estimators.models.attitude_channel import AttitudeChannel
 from estimators.problem import IdentificationModel
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.log import MeasurementLog

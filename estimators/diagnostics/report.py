@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from spaceid_gym.errors import SpaceIdInputError
-from spaceid_gym.log import write_bytes_atomic
+from spaceid_gym.files import write_bytes_atomic
 
 PathLike = str | os.PathLike[str]
 

@@ -43,7 +43,7 @@ from spaceid_gym.effects import MAGNITUDE_UNITS, HiddenEffects, draw_effect
 from spaceid_gym.envs.free_floating import FreeFloatingIDEnv
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.excitation import FourierExcitation
-from spaceid_gym.log import write_csv_atomic, write_json_atomic, write_text_atomic
+from spaceid_gym.files import write_csv_atomic, write_json_atomic, write_text_atomic
 from spaceid_gym.robots import Robot, load_robot
 from spaceid_gym.variations import (
     AXES,

@@ -14,22 +14,21 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from estimators.attitude_channel import AttitudeChannel, AttitudeNoise
 from estimators.base import Estimator
 from estimators.diagnostics.compare import Comparison, compare
 from estimators.diagnostics.diagnose import Diagnosis, candidate_model, diagnose
 from estimators.diagnostics.plots import plot_before_after, plot_correlations, plot_overlay, plot_ranking, plot_residuals
 from estimators.diagnostics.report import HtmlReport
 from estimators.estimate import Estimate
-from estimators.models.attitude_channel import AttitudeChannel, AttitudeNoise
 from estimators.parameters import WithEffects
 from estimators.problem import IdentificationModel
+from estimators.registry import make_estimator
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.log import MeasurementLog
 from spaceid_gym.physics.fuel import FUEL_PARAMETER_NAMES
-
-FloatArray = NDArray[np.float64]
 
 
 def apply_effect(
@@ -44,8 +43,6 @@ def apply_effect(
     With a ``diagnosis`` that fitted this candidate, its fit (least squares from the baseline) is the
     estimate; otherwise ``estimator`` (default ``hybrid``) identifies the extended model from scratch.
     """
-    from estimators.registry import make_estimator
-
     fit = None if diagnosis is None else diagnosis.fit_of(effect)
     extended = candidate_model(model, effect if fit is None else fit.spec)  # the variant the diagnosis chose (slosh)
     if fit is None:
@@ -103,7 +100,7 @@ class ParameterErrors:
 
 def true_parameters(model: IdentificationModel, truth: dict[str, Any]) -> FloatArray | None:
     """``model``'s unknowns (k,) in a simulated truth (``truth.json`` keys): the fuel unknowns, then each effect
-    term's (:meth:`~estimators.models.effects.EffectTerm.from_truth`, off when not hidden); ``None`` unless the
+    term's (:meth:`~estimators.models.effect_models.EffectTerm.from_truth`, off when not hidden); ``None`` unless the
     model's base parameterisation is the fuel one and the truth has it."""
     params = model.parameters
     base = params.base if isinstance(params, WithEffects) else params

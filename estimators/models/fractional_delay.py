@@ -25,10 +25,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numpy.typing import NDArray
 from scipy.fft import irfft, next_fast_len, rfft, rfftfreq
 
-FloatArray = NDArray[np.float64]
+from spaceid_gym.arrays import FloatArray
 
 #: samples of held value added at each end beyond the largest lag: the sinc's tail past the held values' slope change
 #: decays as 1/n^2, so a few tens of samples keep the wrap-around below 1e-4 of the series' steps

@@ -29,12 +29,12 @@ import pinocchio as pin
 from numba import njit
 from numpy.typing import NDArray
 
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.log import MeasurementLog
 from spaceid_gym.physics.fuel import base_params10_after_fuel
 from spaceid_gym.physics.inertia import SPATIAL_INERTIA_BASIS, point_mass_inertia, spatial_inertia_matrix, transform_params10
 from spaceid_gym.robots import Robot
 
-FloatArray = NDArray[np.float64]
 Samples = slice | NDArray[np.intp]
 
 #: the models of each log (:meth:`MomentumModel.of`), dropped with the log

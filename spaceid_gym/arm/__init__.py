@@ -4,7 +4,7 @@
 * :class:`ArmRegressor` (:mod:`.regressor`): ``tau = Y(q, dq, ddq) p`` with per-link inertial
   parameters and per-joint friction (:class:`FrictionModel`, :mod:`.friction`);
   :class:`BaseParameterSet`: the identifiable combinations ``beta = K p``; :func:`stack`.
-* :class:`ArmLog` (:mod:`.log`): a joint log (torque or current) and its CSV file.
+* :class:`ArmLog` (:mod:`.joint_log`): a joint log (torque or current) and its CSV file.
 * :func:`load_ur5_movement`, :func:`list_movements` (:mod:`.real_logs`): the real UR5 logs.
 * :func:`prepare_for_identification` and its parts (:mod:`.signal`): filter, differentiate,
   resample, decimate.
@@ -23,7 +23,7 @@ Typical use::
 from __future__ import annotations
 
 from spaceid_gym.arm.friction import FRICTION_TERMS, FrictionModel
-from spaceid_gym.arm.log import ArmLog
+from spaceid_gym.arm.joint_log import ArmLog
 from spaceid_gym.arm.real_logs import UR5_TORQUE_CONSTANTS_NM_A, LoadReport, list_movements, load_ur5_movement
 from spaceid_gym.arm.regressor import ArmRegressor, BaseParameterSet, stack
 from spaceid_gym.arm.robot import DEFAULT_DDQ_LIMIT_RAD_S2, ArmRobot, arm_from_urdf_text, available_arms, load_arm

@@ -1,11 +1,11 @@
-"""Simulated arm datasets: run :class:`~spaceid_gym.arm.simulator.ArmSimulator` on an excitation, write a folder.
+"""Simulated arm datasets: run :class:`~spaceid_gym.arm.torque_simulator.ArmSimulator` on an excitation, write a folder.
 
 The folder has the layout of the free-floating datasets (:mod:`spaceid_gym.log`), every file
 written atomically:
 
 | file | content |
 |---|---|
-| ``log.csv`` | the :class:`~spaceid_gym.arm.log.ArmLog` CSV: ``t,q1..qN,dq1..dqN,ddq1..ddqN,tau1..tauN`` (or ``i1..iN``); measured q, dq and effort; ``ddq`` is the simulator's true acceleration (not a measurement) |
+| ``log.csv`` | the :class:`~spaceid_gym.arm.joint_log.ArmLog` CSV: ``t,q1..qN,dq1..dqN,ddq1..ddqN,tau1..tauN`` (or ``i1..iN``); measured q, dq and effort; ``ddq`` is the simulator's true acceleration (not a measurement) |
 | ``robot.urdf`` | the robot as the estimators get it (the URDF's nominal inertias, no friction) |
 | ``truth.json`` | ``parameters`` (name -> true value), ``base_parameters`` (combination -> value), friction model, noise, controller, rates, trajectory, seed, tracking error and torque use |
 
@@ -25,11 +25,16 @@ from typing import Any
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from spaceid_gym.arm.excitation import FourierTrajectory, optimise_excitation, random_fourier_trajectory, regressor_condition
+from spaceid_gym.arm.excitation_design import (
+    FourierTrajectory,
+    optimise_excitation,
+    random_fourier_trajectory,
+    regressor_condition,
+)
 from spaceid_gym.arm.friction import FrictionModel
 from spaceid_gym.arm.regressor import ArmRegressor, BaseParameterSet
 from spaceid_gym.arm.robot import ArmRobot, load_arm
-from spaceid_gym.arm.simulator import (
+from spaceid_gym.arm.torque_simulator import (
     INTERNAL_RATE_HZ,
     SAMPLE_RATE_HZ,
     ArmSensorModel,
@@ -74,7 +79,7 @@ def simulate_arm_dataset(
         friction: friction terms of the true robot (e.g. ``("coulomb", "viscous")``; ``None`` = none).
         seed: the seed of every random draw (see the module docstring).
         trajectory: ``"fourier"`` (random feasible Fourier series, 5 harmonics of 0.1 Hz),
-            ``"optimised"`` (:func:`~spaceid_gym.arm.excitation.optimise_excitation`, condition
+            ``"optimised"`` (:func:`~spaceid_gym.arm.excitation_design.optimise_excitation`, condition
             number, a few seconds) or a :class:`FourierTrajectory`.
         out_dir: the folder (created; existing files replaced).
         sample_rate_hz, internal_rate_hz: log and RK4 rates, Hz.

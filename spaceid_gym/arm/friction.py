@@ -28,11 +28,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
 
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
-
-FloatArray = NDArray[np.float64]
 
 #: Every friction term, in the order their coefficients appear per joint.
 FRICTION_TERMS: tuple[str, ...] = ("coulomb", "viscous", "stribeck", "offset")

@@ -44,10 +44,10 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from spaceid_gym.arm.log import ArmLog
+from spaceid_gym.arm.joint_log import ArmLog
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 
-FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
 #: Approximate joint torque per motor current, N m / A, joints 1-6: the rough slopes given by the

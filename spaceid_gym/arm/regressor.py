@@ -41,10 +41,10 @@ from numpy.typing import NDArray
 
 from spaceid_gym.arm.friction import FrictionModel
 from spaceid_gym.arm.robot import ArmRobot
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.physics.inertia import PARAMS10_NAMES
 
-FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
 #: Name suffixes of a body's 10 inertial parameters, in pinocchio's order.

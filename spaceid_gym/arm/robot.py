@@ -25,10 +25,9 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.robots.robot import build_pinocchio_model, parse_urdf_root
-
-FloatArray = NDArray[np.float64]
 
 #: Standard gravity used for the arms (pinocchio's default magnitude), m/s^2, along -z of the base.
 GRAVITY_M_S2: tuple[float, float, float] = (0.0, 0.0, -9.81)

@@ -38,12 +38,10 @@ from collections.abc import Callable
 
 import numpy as np
 import scipy.signal
-from numpy.typing import NDArray
 
-from spaceid_gym.arm.log import ArmLog
+from spaceid_gym.arm.joint_log import ArmLog
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
-
-FloatArray = NDArray[np.float64]
 
 #: A log is uniformly sampled if every step is within this fraction of the median step.
 UNIFORM_RTOL = 1e-3

@@ -11,22 +11,21 @@ import numpy as np
 from gymnasium import spaces
 from numpy.typing import NDArray
 
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.effects import HiddenEffects, parse_effect_spec, parse_hidden_effects
 from spaceid_gym.envs.actions import checked_action
+from spaceid_gym.envs.render import RobotRenderer, base_half_extents_from_inertia
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.information import add_information, cramer_rao_std
 from spaceid_gym.log import MeasurementLog
+from spaceid_gym.mission import FuelSchedule
 from spaceid_gym.physics.fuel import base_after_fuel, base_params10_fuel_jacobian, check_fuel
 from spaceid_gym.physics.inertia import RigidBodyInertia
 from spaceid_gym.physics.momentum import base_parameter_directions, twist_parameter_jacobian
 from spaceid_gym.robots import Robot, load_robot
-from spaceid_gym.sim.mission import FuelSchedule
 from spaceid_gym.sim.recorder import LogRecorder
 from spaceid_gym.sim.sensors import Measurement, SensorModel
 from spaceid_gym.sim.simulator import FreeFloatingSimulator, FreeFloatingState
-
-FloatArray = NDArray[np.float64]
-
 
 #: the default identification window: 3000 steps, 60 s at 50 Hz (the registered ``max_episode_steps``)
 WINDOW_STEPS = 3000
@@ -58,7 +57,7 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     a tank at an unknown position. Each episode is one identification window: the agent should
     move the arm so that the gyro and joint measurements carry as much information as possible
     about the fuel parameters ``theta = (mdf, bf_x, bf_y, bf_z)``. Between episodes fuel is
-    consumed according to a :class:`~spaceid_gym.sim.mission.FuelSchedule`.
+    consumed according to a :class:`~spaceid_gym.mission.FuelSchedule`.
 
     ## Action Space
     ``Box(-1, 1, (n,), float32)``: joint-rate commands normalised by each joint's rate limit. They
@@ -125,19 +124,17 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     ## Arguments
     ``robot`` (name or URDF path, default ``"paper6"``), ``control_period_s`` (0.02),
     ``sensors`` (:class:`~spaceid_gym.sim.sensors.SensorModel`, ``None`` for defaults, or
-    ``"noise_free"``), ``fuel_schedule`` (:class:`~spaceid_gym.sim.mission.FuelSchedule`),
+    ``"noise_free"``), ``fuel_schedule`` (:class:`~spaceid_gym.mission.FuelSchedule`),
     ``tank_position_m`` (fixed tank, default drawn per satellite), ``reward_weights``
-    (:class:`RewardWeights`), ``render_mode`` (``"rgb_array"`` or ``None``), ``estimator`` (a
-    registered name such as ``"improved-pso"`` or an :class:`~estimators.base.Estimator`: it is fitted
-    on the window's log at the window's last step, whose ``info`` then holds ``estimate`` (the
-    estimate file's content) and ``estimate_errors`` (``M``, ``r``, ``Ixx``, ``Iyy``, ``Izz`` in %,
-    ``mdf`` in kg, ``bf`` in mm, as in :mod:`estimators.evaluation`)), ``identify_after_steps``
-    (window length in steps after which the estimator runs; default :data:`WINDOW_STEPS`, the registered
-    ``max_episode_steps``: pass the same number to both when changing the window, as the time limit
-    wrapper does not tell the env), ``hidden_effects`` (see *Hidden effects*; default none),
-    ``estimator_effects`` (effects the estimator's model includes, e.g. ``"initial_momentum"``; default none: the
-    paper's model, so hidden effects are missing from it and show in ``estimate_errors``).
-    The measurement log of the current episode: :meth:`measurement_log`.
+    (:class:`RewardWeights`), ``render_mode`` (``"rgb_array"`` or ``None``), ``hidden_effects`` (see
+    *Hidden effects*; default none). The measurement log of the current episode: :meth:`measurement_log`.
+
+    ## Identification
+    The env is the physics and the sensors only: it imports no estimator. ``gym.make("FreeFloatingID-v0",
+    estimator=...)`` wraps it in :class:`~spaceid_gym.envs.estimation.EstimatorWrapper`, which fits the
+    estimator on each window's log (and, for a streaming estimator such as ``ukf``, puts its running estimate
+    in every step's ``info``); see that class for ``estimator``, ``identify_after_steps`` and
+    ``estimator_effects``.
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 50}
@@ -151,10 +148,7 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         tank_position_m: FloatArray | None = None,
         reward_weights: RewardWeights | None = None,
         render_mode: str | None = None,
-        estimator: Any = None,
-        identify_after_steps: int = WINDOW_STEPS,
         hidden_effects: HiddenEffects | str | None = None,
-        estimator_effects: str | None = None,
     ) -> None:
         self.robot = robot if isinstance(robot, Robot) else load_robot(robot)
         if not (np.isfinite(control_period_s) and control_period_s > 0.0):
@@ -183,30 +177,18 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         mid = 0.5 * (self.robot.q_lower_rad + self.robot.q_upper_rad)
         half = 0.5 * (self.robot.q_upper_rad - self.robot.q_lower_rad)
         self._joint_mid, self._inv_tenth_half = mid, 10.0 / half  # excess = (|q - mid| / half - 0.9) / 0.1
-        gyro_std_for_information = (
+        #: the per-sample gyro noise std (rad/s) the information reward (and a streaming estimator) assumes: the
+        #: sensor model's, or the default sensors' when it is noise-free
+        self.gyro_std_rad_s = (
             self.sensors.gyro_std_rad_s(self.control_period_s)
             if self.sensors.gyro_arw_rad_sqrt_s > 0.0
             else SensorModel().gyro_std_rad_s(self.control_period_s)
         )
-        self._gyro_inverse_variance = 1.0 / gyro_std_for_information**2
+        self._gyro_inverse_variance = 1.0 / self.gyro_std_rad_s**2
         self._tank: FloatArray | None = None
         self._fuel_consumed_kg = 0.0
         self._episode = -1
-        self._renderer: Any = None
-        self._estimator = None
-        if estimator is not None:
-            from estimators.registry import make_estimator  # estimators build on this package: imported on demand
-
-            self._estimator = make_estimator(estimator)
-        self._estimator_effects = estimator_effects
-        if estimator_effects is not None:
-            from estimators.models.effects import parse_effects
-
-            parse_effects(estimator_effects)  # validates the spec now, not at the window's end
-        if identify_after_steps < 1:
-            raise SpaceIdInputError(f"identify_after_steps: expected a positive number of steps, got {identify_after_steps!r}")
-        self._identify_after_steps = identify_after_steps
-        self._steps = 0
+        self._renderer: RobotRenderer | None = None
         if isinstance(hidden_effects, str):
             parse_effect_spec(hidden_effects)  # syntax errors now, not at the first reset
         elif hidden_effects is not None and not isinstance(hidden_effects, HiddenEffects):
@@ -257,7 +239,6 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         self._truth = _truth_info(self._fuel_consumed_kg, self._tank, base, self._episode)
         if effects:
             self._truth["hidden_effects"] = effects.to_dict()
-        self._steps = 0
         return self._observation(self._record(state)), {"truth": self.truth()}
 
     def step(self, action: NDArray[np.float32]) -> tuple[NDArray[np.float32], float, bool, bool, dict[str, Any]]:
@@ -280,16 +261,11 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             "penalty_attitude": penalty_attitude,
             "log_det_fisher": self._log_det_fisher,
         }
-        self._steps += 1
-        if self._estimator is not None and self._steps == self._identify_after_steps:
-            info.update(self._identify())
         return self._observation(sample), gain - penalty_limit - penalty_attitude, False, False, info
 
     def render(self) -> NDArray[np.uint8] | None:
         if self.render_mode != "rgb_array":
             return None
-        from spaceid_gym.envs.render import RobotRenderer, base_half_extents_from_inertia
-
         if self._renderer is None:
             base = self.robot.base_full
             extents = base_half_extents_from_inertia(base.mass_kg, base.inertia_com_kgm2)
@@ -299,9 +275,12 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         return self._renderer.render(state.pinocchio_configuration()[: self.simulator.arm_model.nq], info_text=text)
 
     # ------------------------------------------------------------------ extras
-    def measurement_log(self) -> MeasurementLog:
-        """The measurements of the current episode so far (one sample per control period), hidden effects included."""
-        return self._recorder.log()
+    def measurement_log(self, last: int | None = None) -> MeasurementLog:
+        """The measurements of the current episode so far (one sample per control period), hidden effects included.
+
+        ``last``: only the last ``last`` samples (a streaming estimator's newest sample without copying the window).
+        """
+        return self._recorder.log(last)
 
     @property
     def effects(self) -> HiddenEffects:
@@ -347,19 +326,6 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         if self._gyro_delay_s > 0.0:
             return self._recorder.record(state, self.simulator.state_at(state.t_s - self._gyro_delay_s))
         return self._recorder.record(state)
-
-    def _identify(self) -> dict[str, Any]:
-        """Run the estimator on the episode's window: ``estimate`` (the estimate file's dict) and ``estimate_errors``."""
-        from estimators.evaluation import quantity_errors
-        from estimators.problem import IdentificationModel
-
-        assert self._estimator is not None
-        model = IdentificationModel(self.robot, "fuel", effects=self._estimator_effects)
-        estimate = self._estimator.fit(model, self.measurement_log())
-        theta_true = np.concatenate(([self._fuel_consumed_kg], self._tank))
-        truth = IdentificationModel(self.robot, "fuel").parameters.physical(theta_true)
-        errors = quantity_errors(model.parameters.physical(estimate.theta), truth)
-        return {"estimate": estimate.to_dict(), "estimate_errors": errors}
 
     def _fisher_update(self, composite: Any, twist: FloatArray) -> float:
         """Add one gyro sample's information; return the gain ``0.5 (log det F_t - log det F_{t-1})``."""

@@ -13,15 +13,14 @@ from numpy.typing import NDArray
 from threadpoolctl import threadpool_limits
 
 from spaceid_gym.arm.friction import FrictionModel
-from spaceid_gym.arm.log import ArmLog
+from spaceid_gym.arm.joint_log import ArmLog
 from spaceid_gym.arm.regressor import ArmRegressor, BaseParameterSet
 from spaceid_gym.arm.robot import ArmRobot, load_arm
-from spaceid_gym.arm.simulator import ArmSensorModel, ArmSimulator, ParameterPrior, TrackingController, nominal_parameters
+from spaceid_gym.arm.torque_simulator import ArmSensorModel, ArmSimulator, ParameterPrior, TrackingController, nominal_parameters
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.envs.actions import checked_action
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.information import add_information, cramer_rao_std
-
-FloatArray = NDArray[np.float64]
 
 #: the default identification window: 3750 steps, 30 s at 125 Hz (the registered ``max_episode_steps``)
 WINDOW_STEPS = 3750
@@ -53,7 +52,7 @@ class ManipulatorIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
 
     ## Description
     The arm stands on a fixed base under gravity. The agent commands joint rates (or
-    accelerations); a computed-torque controller makes the arm follow them (:mod:`spaceid_gym.arm.simulator`), and
+    accelerations); a computed-torque controller makes the arm follow them (:mod:`spaceid_gym.arm.torque_simulator`), and
     the joint sensors measure angles, rates and the motor torque (or current). The torque is
     linear in the unknown parameters, ``tau = Y(q, dq, ddq) p`` (10 inertial parameters per link
     and Coulomb/viscous friction per joint); only the r base combinations ``beta = K p`` can be
@@ -91,7 +90,7 @@ class ManipulatorIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
 
     * information gain = ``0.5 (log det F_t - log det F_{t-1})`` (nats), ``F`` the accumulated
       Fisher information of the torque measurements about the base parameters in units of their
-      prior std (:class:`~spaceid_gym.arm.simulator.ParameterPrior`), starting from the prior
+      prior std (:class:`~spaceid_gym.arm.torque_simulator.ParameterPrior`), starting from the prior
       ``F_0 = I``: each step adds ``J^T J`` with ``J = Y_b(q, dq, ddq) S / sigma`` (rows divided by
       each joint's torque noise std, ``S = diag(prior std)``), at the true state of the sample.
       Summed over an episode it is ``0.5 log det F_T``. With ``sensors="noise_free"`` the default
@@ -121,10 +120,10 @@ class ManipulatorIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     rate, default 500 Hz, 1300 env steps/s against 950 at 1 kHz on the 2-core test machine; over
     12 s of random commands the joint angles differ from a 4 kHz run by 1.1e-6 rad, a tenth of the
     encoder noise (1 kHz: 5e-8 rad); at any rate every sample satisfies ``u = Y(q, dq, ddq) p``
-    exactly; :mod:`spaceid_gym.arm.simulator` uses 1 kHz for datasets),
-    ``sensors`` (:class:`~spaceid_gym.arm.simulator.ArmSensorModel`, ``None`` for defaults, or
-    ``"noise_free"``), ``prior`` (:class:`~spaceid_gym.arm.simulator.ParameterPrior`),
-    ``controller`` (:class:`~spaceid_gym.arm.simulator.TrackingController`), ``reward_weights``
+    exactly; :mod:`spaceid_gym.arm.torque_simulator` uses 1 kHz for datasets),
+    ``sensors`` (:class:`~spaceid_gym.arm.torque_simulator.ArmSensorModel`, ``None`` for defaults, or
+    ``"noise_free"``), ``prior`` (:class:`~spaceid_gym.arm.torque_simulator.ParameterPrior`),
+    ``controller`` (:class:`~spaceid_gym.arm.torque_simulator.TrackingController`), ``reward_weights``
     (:class:`ManipulatorRewardWeights`), ``base_parameters`` (a
     :class:`~spaceid_gym.arm.regressor.BaseParameterSet`; default computed from 300 random states
     of a generator seeded with 0: structure, not an episode draw). No rendering.

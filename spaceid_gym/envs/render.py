@@ -40,7 +40,7 @@ from mpl_toolkits.mplot3d.art3d import Line3D
 from mpl_toolkits.mplot3d.axes3d import Axes3D
 from numpy.typing import NDArray
 
-FloatArray = NDArray[np.float64]
+from spaceid_gym.arrays import FloatArray
 
 #: view direction of the fixed camera, degrees
 VIEW_ELEV_DEG = 25.0

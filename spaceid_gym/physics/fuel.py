@@ -17,12 +17,10 @@ information.
 from __future__ import annotations
 
 import numpy as np
-from numpy.typing import NDArray
 
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.physics.inertia import RigidBodyInertia, point_mass_inertia
-
-FloatArray = NDArray[np.float64]
 
 #: names of the 4 fuel parameters, in order
 FUEL_PARAMETER_NAMES = ("fuel_consumed_kg", "tank_x_m", "tank_y_m", "tank_z_m")

@@ -17,11 +17,9 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 from numba import njit
-from numpy.typing import NDArray
 
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.physics.inertia import SPATIAL_INERTIA_BASIS
-
-FloatArray = NDArray[np.float64]
 
 
 @njit(cache=True)

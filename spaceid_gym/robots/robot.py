@@ -17,12 +17,10 @@ from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
-from numpy.typing import NDArray
 
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.physics.inertia import RigidBodyInertia
-
-FloatArray = NDArray[np.float64]
 
 _SUPPORTED_JOINTS = {"revolute", "fixed"}
 
@@ -111,7 +109,7 @@ def load_robot(spec: str | Path) -> Robot:
 
     The tank position and the fuel consumed are not part of a robot: they are the fuel model's
     unknowns (:mod:`spaceid_gym.physics.fuel`), drawn per satellite by
-    :class:`~spaceid_gym.sim.mission.FuelSchedule` (usable fuel 25 % of the wet base mass) unless given.
+    :class:`~spaceid_gym.mission.FuelSchedule` (usable fuel 25 % of the wet base mass) unless given.
 
     Raises:
         SpaceIdInputError: unknown name, missing file, malformed XML, a link without

@@ -36,12 +36,10 @@ import math
 
 import numpy as np
 from numba import njit
-from numpy.typing import NDArray
 
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.sim.lie import quat_from_rotation_vector, quat_multiply
-
-FloatArray = NDArray[np.float64]
 
 
 def filter_gain(

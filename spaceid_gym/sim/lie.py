@@ -10,9 +10,8 @@ import math
 
 import numpy as np
 from numba import njit
-from numpy.typing import NDArray
 
-FloatArray = NDArray[np.float64]
+from spaceid_gym.arrays import FloatArray
 
 
 @njit(cache=True)

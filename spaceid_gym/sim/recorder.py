@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.log import MeasurementLog
 from spaceid_gym.sim.sensors import Measurement, Sampler, SensorModel
 from spaceid_gym.sim.simulator import FreeFloatingState
@@ -42,12 +43,18 @@ class LogRecorder:
     def __len__(self) -> int:
         return len(self._t)
 
-    def log(self) -> MeasurementLog:
-        """The samples so far as a :class:`~spaceid_gym.log.MeasurementLog` (without attitude if the sensors measure none)."""
-        samples = self._samples
+    def log(self, last: int | None = None) -> MeasurementLog:
+        """The samples so far as a :class:`~spaceid_gym.log.MeasurementLog` (without attitude if the sensors measure none).
+
+        ``last``: only the last ``last`` samples (all when ``None`` or more than recorded).
+        """
+        if last is not None and (isinstance(last, bool) or not isinstance(last, int) or last < 1):
+            raise SpaceIdInputError(f"last: expected a positive number of samples or None, got {last!r}")
+        start = 0 if last is None else max(len(self._t) - last, 0)
+        samples = self._samples[start:]
         quats = [m.quat_base_to_inertial_wxyz for m in samples]
         return MeasurementLog(
-            t_s=np.array(self._t),
+            t_s=np.array(self._t[start:]),
             q_rad=np.array([m.q_rad for m in samples]),
             dq_rad_s=np.array([m.dq_rad_s for m in samples]),
             omega_base_body_rad_s=np.array([m.omega_base_body_rad_s for m in samples]),

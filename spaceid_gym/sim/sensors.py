@@ -43,14 +43,12 @@ from typing import Protocol
 
 import numpy as np
 from numba import njit
-from numpy.typing import NDArray
 
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.sim.attitude_filter import AttitudeFilter, filter_gain, filter_time_constant_s, steady_state_error_std_rad
 from spaceid_gym.sim.lie import quat_from_matrix, quat_from_rotation_vector, quat_multiply
 from spaceid_gym.sim.simulator import FreeFloatingState
-
-FloatArray = NDArray[np.float64]
 
 #: one arcsecond in rad
 ARCSEC_RAD = math.pi / (180.0 * 3600.0)

@@ -20,9 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-from numpy.typing import NDArray
 
-FloatArray = NDArray[np.float64]
+from spaceid_gym.arrays import FloatArray
 
 
 @dataclass(frozen=True)

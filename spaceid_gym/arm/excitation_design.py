@@ -39,14 +39,12 @@ from typing import Any
 
 import numpy as np
 import scipy.optimize
-from numpy.typing import NDArray
 from threadpoolctl import threadpool_limits
 
 from spaceid_gym.arm.regressor import ArmRegressor, BaseParameterSet
 from spaceid_gym.arm.robot import ArmRobot
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
-
-FloatArray = NDArray[np.float64]
 
 CRITERIA = ("condition", "d-optimal")
 _FD_STEP = 1e-6  # forward-difference step in q (rad) and dq (rad/s)

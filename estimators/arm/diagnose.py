@@ -8,7 +8,7 @@ levels), and ranks them:
   ``stribeck``, ``offset`` (a constant torque or current bias) and ``armature`` (rotor inertia);
 * weights: each joint's noise std ``s_j`` from the fit with every candidate term at once (the best-fitting model, as
   the free-floating diagnosis takes the smallest residual std); ``chi2 = sum_rows (r / s_j)^2 / kappa`` with
-  ``kappa`` the movement's :meth:`~estimators.arm_identification.Preparation.correlation_factor`: the prepared
+  ``kappa`` the movement's :meth:`~estimators.arm.identification.Preparation.correlation_factor`: the prepared
   rows are low-pass filtered, so ``kappa`` (about 3.5) of them carry one independent sample's information about the
   slowly varying columns; the sample count ``N`` of the excess and the BIC is ``sum N_m / kappa_m`` likewise;
 * scores: likelihood ratio ``chi2_baseline - chi2_candidate`` against chi-square with as many degrees of freedom as
@@ -34,10 +34,11 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 from scipy import stats
 
-from estimators.arm_identification import Preparation, fit, raw_period
+from estimators.arm.identification import Preparation, fit, raw_period
+from estimators.arm.linear_ls import weighted_lstsq
+from estimators.arm.model import ArmIdentificationModel, IdentificationRows
 from estimators.diagnostics.diagnose import (
     EXPLAINED_FRACTION,
     NO_MISSING_EFFECT,
@@ -46,14 +47,11 @@ from estimators.diagnostics.diagnose import (
     explained_fraction,
 )
 from estimators.diagnostics.residuals import Segment, failing_segments
-from estimators.linear_ls import weighted_lstsq
-from estimators.models.arm_model import ArmIdentificationModel, IdentificationRows
 from estimators.registry import make_estimator
 from spaceid_gym.arm.friction import FRICTION_TERMS
-from spaceid_gym.arm.log import ArmLog
+from spaceid_gym.arm.joint_log import ArmLog
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
-
-FloatArray = NDArray[np.float64]
 
 #: candidate label -> (friction terms added, armature added)
 CANDIDATES: dict[str, tuple[tuple[str, ...], bool]] = {

@@ -22,10 +22,11 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
-from spaceid_gym.log import JointTimeSeries, _read_csv_rows, atomic_open
+from spaceid_gym.files import atomic_open
+from spaceid_gym.log import JointTimeSeries, _read_csv_rows
 
-FloatArray = NDArray[np.float64]
 PathLike = str | os.PathLike[str]
 
 #: effort kind -> CSV column prefix

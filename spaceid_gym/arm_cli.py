@@ -10,9 +10,27 @@ import time
 from pathlib import Path
 from typing import Any
 
+from estimators.arm.diagnose import diagnose_arm, where_it_fails
+from estimators.arm.identification import (
+    Preparation,
+    cross_validation_markdown,
+    fit,
+    leave_one_out,
+    load_movements,
+    prediction_error,
+    processed_noise_floor,
+    simulated_noise_std,
+    summary_table,
+)
+from estimators.arm.model import ArmIdentificationModel
+from estimators.diagnostics.plots import plot_overlay
+from estimators.evaluation import estimator_from_spec, parse_estimator_specs
+from spaceid_gym.arm.datasets import simulate_arm_dataset  # the optimiser and simulator load only when used
 from spaceid_gym.arm.friction import FRICTION_TERMS
-from spaceid_gym.arm.simulator import INTERNAL_RATE_HZ, SAMPLE_RATE_HZ, ArmSensorModel
+from spaceid_gym.arm.robot import load_arm
+from spaceid_gym.arm.torque_simulator import INTERNAL_RATE_HZ, SAMPLE_RATE_HZ, ArmSensorModel
 from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.files import write_json_atomic, write_text_atomic
 
 _EFFORTS = {"torque": "torque_Nm", "current": "current_A"}
 
@@ -60,8 +78,6 @@ def run_arm_simulate(args: argparse.Namespace) -> None:
     Reads ``args.robot, trajectory, duration, friction, seed, rate, noise_free, out`` and, if
     present, ``args.effort`` (``"torque"`` or ``"current"``, default torque).
     """
-    from spaceid_gym.arm.datasets import simulate_arm_dataset  # the optimiser and simulator load only when used
-
     if not (args.rate > 0 and args.rate < float("inf")):
         raise SpaceIdInputError(f"--rate: expected a positive rate in Hz, got {args.rate!r}")
     effort = _EFFORTS.get(getattr(args, "effort", "torque") or "torque")
@@ -148,8 +164,6 @@ def _names(text: str | None) -> list[str] | None:
 
 def _movements(args: argparse.Namespace, names: list[str] | None) -> tuple[Any, dict[str, Any], dict[str, Any]]:
     """The signal chain, the raw logs and their processed noise floors (simulated data) from the arguments."""
-    from estimators.arm_identification import Preparation, load_movements, processed_noise_floor, simulated_noise_std
-
     if args.decimate < 1:
         raise SpaceIdInputError(f"--decimate: expected an integer >= 1, got {args.decimate}")
     preparation = Preparation(cutoff_hz=args.cutoff, decimate_factor=args.decimate)
@@ -159,9 +173,6 @@ def _movements(args: argparse.Namespace, names: list[str] | None) -> tuple[Any, 
 
 
 def _model(args: argparse.Namespace, friction: tuple[str, ...] | None = None) -> Any:
-    from estimators.models.arm_model import ArmIdentificationModel
-    from spaceid_gym.arm.robot import load_arm
-
     terms = parse_friction(args.friction) if friction is None else friction
     return ArmIdentificationModel.build(load_arm(args.robot), terms, args.armature)
 
@@ -181,11 +192,6 @@ def run_arm_identify(args: argparse.Namespace) -> None:
     relative error, its overall figure and, for simulated data, the error in noise units) and one overlay per held-out
     movement (``overlay_<movement>.png``).
     """
-    from estimators.arm_identification import fit, prediction_error
-    from estimators.diagnostics.plots import plot_overlay
-    from estimators.evaluation import estimator_from_spec
-    from spaceid_gym.log import write_json_atomic
-
     validate = _names(args.validate) or []
     train = _names(args.train)
     overlap = set(validate) & set(train or [])
@@ -246,10 +252,6 @@ def run_arm_identify(args: argparse.Namespace) -> None:
 def run_arm_cross_validate(args: argparse.Namespace) -> None:
     """``spaceid arm cross-validate``: leave one movement out, for each estimator (and without friction if asked);
     writes ``table.md`` and ``rows.json`` and prints the per-model, per-estimator means."""
-    from estimators.arm_identification import cross_validation_markdown, leave_one_out, summary_table
-    from estimators.evaluation import estimator_from_spec, parse_estimator_specs
-    from spaceid_gym.log import write_json_atomic, write_text_atomic
-
     preparation, logs, floors = _movements(args, _names(args.movements))
     specs = parse_estimator_specs(args.estimators)
     estimators = {spec: estimator_from_spec(spec, seed=args.seed) for spec in specs}
@@ -288,10 +290,6 @@ def run_arm_cross_validate(args: argparse.Namespace) -> None:
 def run_arm_diagnose(args: argparse.Namespace) -> None:
     """``spaceid arm diagnose``: which joint term is missing (friction, armature, offset), where the model fails;
     with ``--apply``, the error before and after adding it. Writes ``diagnosis.json``."""
-    from estimators.arm_identification import prediction_error
-    from estimators.diagnostics.arm_diagnose import diagnose_arm, where_it_fails
-    from spaceid_gym.log import write_json_atomic
-
     preparation, logs, floors = _movements(args, _names(args.movements))
     model = _model(args)
     diagnosis = diagnose_arm(model, logs, preparation)

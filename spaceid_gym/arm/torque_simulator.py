@@ -69,16 +69,14 @@ from typing import Any
 
 import numpy as np
 import pinocchio as pin
-from numpy.typing import NDArray
 
 from spaceid_gym.arm.friction import FrictionModel
-from spaceid_gym.arm.log import EFFORT_KINDS, ArmLog
+from spaceid_gym.arm.joint_log import EFFORT_KINDS, ArmLog
 from spaceid_gym.arm.real_logs import UR5_TORQUE_CONSTANTS_NM_A
 from spaceid_gym.arm.regressor import ArmRegressor, BaseParameterSet
 from spaceid_gym.arm.robot import ArmRobot
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
-
-FloatArray = NDArray[np.float64]
 
 #: A reference trajectory: times (T,) s -> (q_r (T, n) rad, dq_r (T, n) rad/s, ddq_r (T, n) rad/s^2).
 Reference = Callable[[FloatArray], tuple[FloatArray, FloatArray, FloatArray]]
@@ -515,7 +513,7 @@ class ArmSimulator:
 
         Args:
             reference: times (T,) -> (q, dq, ddq) each (T, n) (e.g. a
-                :class:`~spaceid_gym.arm.excitation.FourierTrajectory`), evaluated once at all stage times.
+                :class:`~spaceid_gym.arm.excitation_design.FourierTrajectory`), evaluated once at all stage times.
             duration_s: length, s; ``floor(duration * rate)`` sample periods (samples at 0 .. that time).
             rng: the generator of the sensor noise (one draw of shape (T, 3, n)).
             start_on_reference: start at ``t = 0`` on the reference's state (default), else from

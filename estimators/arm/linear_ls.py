@@ -1,7 +1,7 @@
 """Least squares for linear identification problems: ordinary (``ols``) and weighted (``wls``).
 
 Both solve ``tau = Y theta`` exactly (no search, no bounds) on a
-:class:`~estimators.linear_problem.LinearIdentificationProblem` and are the standard the metaheuristics
+:class:`~estimators.arm.linear_problem.LinearIdentificationProblem` and are the standard the metaheuristics
 are measured against.
 
 * :class:`OrdinaryLeastSquares` minimises ``sum_i (Y_i theta - tau_i)^2`` with
@@ -23,14 +23,12 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from estimators.arm.linear_problem import LinearIdentificationProblem
 from estimators.base import Estimator, SearchResult
-from estimators.linear_problem import LinearIdentificationProblem
 from estimators.options import check_int
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
-
-FloatArray = NDArray[np.float64]
 
 
 def _linear(problem: Any, name: str) -> LinearIdentificationProblem:

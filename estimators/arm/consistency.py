@@ -42,10 +42,10 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.physics.inertia import inertia_matrix_from_entries
 
-FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
 
 #: names of the 10 log-Cholesky coordinates of one body, in order

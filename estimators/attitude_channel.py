@@ -46,22 +46,18 @@ from __future__ import annotations
 import math
 import weakref
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import Any, Protocol
 
 import numpy as np
 from numba import njit
-from numpy.typing import NDArray
 from scipy.linalg import cholesky_banded
 from scipy.optimize import minimize
 from scipy.spatial.transform import Rotation, Slerp
 
+from estimators.problem import IdentificationModel
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.log import MeasurementLog
-
-if TYPE_CHECKING:
-    from estimators.problem import IdentificationModel
-
-FloatArray = NDArray[np.float64]
 
 
 class BaseRateProblem(Protocol):

@@ -36,15 +36,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from estimators.consistency import PhysicalConsistency
+from estimators.arm.consistency import PhysicalConsistency
 from estimators.estimate import Estimate
-from estimators.models.momentum_model import Samples
 from estimators.parameters import Parameterisation
-from estimators.problem import IdentificationProblem, identifiability
+from estimators.problem import IdentificationProblem, Samples, identifiability
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.information import cramer_rao_std
 
-FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
 
 
@@ -115,7 +114,7 @@ class LinearIdentificationProblem:
         nominal: value assumed without identification (k,), inside the range; default the range's middle.
         row_std: noise std of each row (N,), > 0, when known; ``None`` estimates it per group from residuals.
         row_group: group of each row (N,) non-negative ints (e.g. the joint index), for per-group noise; default one group.
-        consistency: which columns are links and friction (:class:`~estimators.consistency.PhysicalConsistency`),
+        consistency: which columns are links and friction (:class:`~estimators.arm.consistency.PhysicalConsistency`),
             for the physically consistent estimators and the consistency report; its ``n_theta`` must be k.
         name: the parameterisation's name in the estimate (default ``"linear"``).
 

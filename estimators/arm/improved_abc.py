@@ -2,7 +2,7 @@
 
 Both search the **unit box** ``u = (x - lower) / width`` of their search coordinates ``x``: the
 problem's ``theta`` within its search range, or, for the physically consistent variant, the
-log-Cholesky coordinates of :class:`~estimators.consistency.PhysicalConsistency` (every candidate is a
+log-Cholesky coordinates of :class:`~estimators.arm.consistency.PhysicalConsistency` (every candidate is a
 physically consistent set of bodies; the cost is the problem's, of ``theta = K x_full``).
 
 Classic ABC (Karaboga 2005; Karaboga and Akay 2009)
@@ -77,12 +77,12 @@ improved ABC reaches the WLS error (0.98, held-out torque error 1.007 x the nois
 without the optional changes, while the classic colony is at 26.7 (held-out 3.8 x the noise).
 
 Physically consistent variant: ``consistent=True`` (either class) searches the log-Cholesky coordinates
-of the problem's :class:`~estimators.consistency.PhysicalConsistency` (the box from
-:meth:`~estimators.consistency.PhysicalConsistency.search_box`); the estimate's ``extra`` holds the
+of the problem's :class:`~estimators.arm.consistency.PhysicalConsistency` (the box from
+:meth:`~estimators.arm.consistency.PhysicalConsistency.search_box`); the estimate's ``extra`` holds the
 consistent full parameters (``full_params``) and the estimate reports each link's consistency. Its ``polish``
 leaves the box and the log-Cholesky coordinates for a Newton descent in factor coordinates (``J = Y Y^T`` per link),
 where every local minimum is the global consistent one: with it the colony ends at the cost of the convex ``sdp``
-estimator (:mod:`estimators.sdp`), which every consistent fit reports its excess over.
+estimator (:mod:`estimators.arm.sdp`), which every consistent fit reports its excess over.
 """
 
 from __future__ import annotations
@@ -96,16 +96,16 @@ from numpy.typing import NDArray
 from scipy.optimize import least_squares, minimize
 from threadpoolctl import threadpool_limits
 
+from estimators.arm.consistency import PhysicalConsistency
+from estimators.arm.linear_problem import LinearIdentificationProblem
+from estimators.arm.sdp import excess_over_optimum
 from estimators.base import Estimator, SearchResult
-from estimators.consistency import PhysicalConsistency
 from estimators.estimate import Estimate
-from estimators.linear_problem import LinearIdentificationProblem
 from estimators.options import check_bool, check_float, check_int
 from estimators.problem import IdentificationProblem
-from estimators.sdp import excess_over_optimum
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 
-FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
 
 
@@ -159,7 +159,7 @@ def search_space(problem: Any, consistent: bool) -> SearchSpace:
 def _polished(problem: Any, space: SearchSpace, start: FloatArray) -> FloatArray:
     """Search coordinates (D,) after a bounded local least-squares descent from ``start`` (D,) on the problem's root cost.
 
-    The Jacobian is ``A d theta / d x`` with ``A`` of :meth:`~estimators.linear_problem.LinearIdentificationProblem.root_form`
+    The Jacobian is ``A d theta / d x`` with ``A`` of :meth:`~estimators.arm.linear_problem.LinearIdentificationProblem.root_form`
     and ``d theta / d x`` by forward differences in one batched map (D + 1 points); at most ``POLISH_ITERATIONS`` steps.
     """
     if not isinstance(problem, LinearIdentificationProblem):
@@ -204,11 +204,11 @@ def _polished_consistent(problem: Any, consistency: PhysicalConsistency, start: 
     """Consistent full parameters (n_full,) after a Newton descent from the search point ``start`` (n_full,), and its facts.
 
     The cost ``c_ls + |A (K x(y) - theta_ls)|^2`` (root form) in the factor coordinates ``y`` of
-    :meth:`~estimators.consistency.PhysicalConsistency.factor_from_search` (``J_hat = Y Y^T`` per link, friction
+    :meth:`~estimators.arm.consistency.PhysicalConsistency.factor_from_search` (``J_hat = Y Y^T`` per link, friction
     ``scale w^2``): every local minimum there is the global minimum over the consistent parameters, and the boundary
     (a thin body, zero friction) lies at finite ``y``. A trust-region Newton method (``scipy.optimize.minimize``) with
     the exact gradient ``2 G^T r`` and Hessian ``2 (G^T G + sum_c (K^T A^T r)_c d^2 x_c / dy^2)``, ``G = A K dx/dy``
-    (:meth:`~estimators.consistency.PhysicalConsistency.factor_jacobian`, ``factor_curvature``): the second term, the
+    (:meth:`~estimators.arm.consistency.PhysicalConsistency.factor_jacobian`, ``factor_curvature``): the second term, the
     curvature of the map times the residual, is what Gauss-Newton (the ``consistent=False`` polish) leaves out and why
     it crawls where the constraints hold the optimum away from the unconstrained one.
 
@@ -293,13 +293,13 @@ class ArtificialBeeColony(Estimator):
         polish: after the colony, a local descent from the best source (linear problems only), its evaluations counted
             in the budget's total but not limited by it (default False). Without ``consistent``: least squares in the
             search box (``scipy.optimize.least_squares``, trust region reflective, on the problem's
-            :meth:`~estimators.linear_problem.LinearIdentificationProblem.root_cost`). With ``consistent``: a Newton
+            :meth:`~estimators.arm.linear_problem.LinearIdentificationProblem.root_cost`). With ``consistent``: a Newton
             descent over every consistent parameter set, not only the box (:func:`_polished_consistent`), which ends at
             the global consistent optimum the ``sdp`` estimator computes.
         seed: the generator's seed.
 
     With ``consistent=True`` on a linear problem the estimate also reports its cost against the convex consistent
-    optimum of the same cost (:func:`~estimators.sdp.excess_over_optimum`, solved after the timed fit):
+    optimum of the same cost (:func:`~estimators.arm.sdp.excess_over_optimum`, solved after the timed fit):
     ``extra["sdp_cost"]`` and ``extra["cost_excess_over_sdp"]`` (relative).
     """
 

@@ -31,11 +31,11 @@ import pinocchio as pin
 import scipy.linalg
 from numpy.typing import NDArray
 
-from estimators.consistency import PhysicalConsistency
-from estimators.linear_problem import LinearIdentificationProblem, image_box
+from estimators.arm.consistency import PhysicalConsistency
+from estimators.arm.linear_problem import LinearIdentificationProblem, image_box
 from estimators.parameters import PARAMS10_NAMES
+from spaceid_gym.arrays import FloatArray
 
-FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
 
 N_JOINTS = 6
@@ -174,8 +174,8 @@ class ArmBenchmark:
     """The base-parameter problem of one experiment, its truth and a held-out experiment.
 
     Attributes:
-        problem: :class:`~estimators.linear_problem.LinearIdentificationProblem` in base parameters (r = 50), with a
-            :class:`~estimators.consistency.PhysicalConsistency` (``base_map`` = K); noise unknown to it unless
+        problem: :class:`~estimators.arm.linear_problem.LinearIdentificationProblem` in base parameters (r = 50), with a
+            :class:`~estimators.arm.consistency.PhysicalConsistency` (``base_map`` = K); noise unknown to it unless
             ``known_noise``.
         theta_true: (r,) true base parameters; full_true: (72,) true full parameters; base_map: K (r, 72);
         independent: (r,) the full-parameter columns of the base regressor; row_std: (N,) the true noise std per row.

@@ -1,7 +1,7 @@
 """The fixed-base arm's identification model: the base regressor in each log's effort unit, its problem, its predictions.
 
 :class:`ArmIdentificationModel` ties together what :mod:`spaceid_gym.arm` provides (robot, friction,
-regressor, base parameters) and what the estimators fit (:class:`~estimators.linear_problem.LinearIdentificationProblem`):
+regressor, base parameters) and what the estimators fit (:class:`~estimators.arm.linear_problem.LinearIdentificationProblem`):
 
 * **unknowns**: the ``r`` base parameters ``beta = K p`` (:class:`~spaceid_gym.arm.regressor.BaseParameterSet`)
   of the full vector ``p`` = per-link params10 (kg, kg m, kg m^2, about each joint frame's origin),
@@ -19,7 +19,7 @@ regressor, base parameters) and what the estimators fit (:class:`~estimators.lin
 
 The problem is posed on :class:`IdentificationRows`: a movement's filtered, decimated effort and its base regressor
 filtered with the same filter (parallel filtering, :func:`spaceid_gym.arm.signal.parallel_decimation`), made by
-:meth:`estimators.arm_identification.Preparation.rows`.
+:meth:`estimators.arm.identification.Preparation.rows`.
 """
 
 from __future__ import annotations
@@ -31,16 +31,16 @@ import numpy as np
 from numpy.typing import NDArray
 from threadpoolctl import threadpool_limits
 
-from estimators.consistency import PhysicalConsistency
-from estimators.linear_problem import LinearIdentificationProblem, image_box
+from estimators.arm.consistency import PhysicalConsistency
+from estimators.arm.linear_problem import LinearIdentificationProblem, image_box
 from spaceid_gym.arm.friction import FrictionModel
-from spaceid_gym.arm.log import ArmLog
+from spaceid_gym.arm.joint_log import ArmLog
 from spaceid_gym.arm.real_logs import UR5_TORQUE_CONSTANTS_NM_A
 from spaceid_gym.arm.regressor import ArmRegressor, BaseParameterSet
 from spaceid_gym.arm.robot import ArmRobot
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 
-FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
 
 #: search range of a link's mass, as factors of its URDF mass (kg); a URDF mass below MIN_NOMINAL_MASS_KG counts as that

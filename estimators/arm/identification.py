@@ -2,7 +2,7 @@
 
 Data -> :func:`load_movements` (real UR5 movement folders, or simulated dataset folders) -> :meth:`Preparation.rows`
 (uniform time, zero-phase low-pass of the states, acceleration by differentiation, the model's regressor filtered
-with the effort's filter, decimation) -> :func:`fit` (an :class:`~estimators.models.arm_model.ArmIdentificationModel`
+with the effort's filter, decimation) -> :func:`fit` (an :class:`~estimators.arm.model.ArmIdentificationModel`
 problem on the training movements, any registered estimator) -> :func:`prediction_error` on the validation movements
 -> :func:`leave_one_out` tables.
 
@@ -27,19 +27,17 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from estimators.arm.linear_ls import group_weighted
+from estimators.arm.linear_problem import LinearIdentificationProblem
+from estimators.arm.model import ArmIdentificationModel, IdentificationRows
 from estimators.base import Estimator
 from estimators.estimate import Estimate
-from estimators.linear_ls import group_weighted
-from estimators.linear_problem import LinearIdentificationProblem
-from estimators.models.arm_model import ArmIdentificationModel, IdentificationRows
-from spaceid_gym.arm.log import ArmLog
+from spaceid_gym.arm.joint_log import ArmLog
 from spaceid_gym.arm.real_logs import list_movements, load_ur5_movement
 from spaceid_gym.arm.signal import lowpass_zero_phase, parallel_decimation, uniform_period
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
-
-FloatArray = NDArray[np.float64]
 
 #: estimators that weigh the rows themselves (everything else gets the per-joint weights of the module docstring)
 SELF_WEIGHTING = ("ols", "wls")

@@ -1,8 +1,8 @@
 """Physically consistent weighted least squares as a semidefinite program: the ``sdp`` estimator.
 
 The convex reference of every physically consistent estimator: on a
-:class:`~estimators.linear_problem.LinearIdentificationProblem` with a
-:class:`~estimators.consistency.PhysicalConsistency` (which columns of the full parameters ``x`` are links,
+:class:`~estimators.arm.linear_problem.LinearIdentificationProblem` with a
+:class:`~estimators.arm.consistency.PhysicalConsistency` (which columns of the full parameters ``x`` are links,
 friction/armature and free coefficients; ``theta = K x``) it finds the global minimum of the problem's weighted
 least-squares cost over the physically consistent full parameters.
 
@@ -22,17 +22,17 @@ cone, the cost convex quadratic, so the optimum is global; the program is solved
 solver Clarabel (deterministic: the same problem gives the same estimate).
 
 * **Cost**: the problem's cost, ``cost(theta) = c_ls + |A (theta - theta_ls)|^2`` in the root form of
-  :meth:`~estimators.linear_problem.LinearIdentificationProblem.root_form` (``c_ls`` the unconstrained least-squares
+  :meth:`~estimators.arm.linear_problem.LinearIdentificationProblem.root_form` (``c_ls`` the unconstrained least-squares
   minimum): the same weighted mean squared residual the metaheuristics minimise. Weights: the problem's ``row_std``
-  when it has one; otherwise, like :class:`~estimators.linear_ls.WeightedLeastSquares`, Gautier's two-step weights
+  when it has one; otherwise, like :class:`~estimators.arm.linear_ls.WeightedLeastSquares`, Gautier's two-step weights
   (each group's noise std from an OLS fit). Without constraints the program is WLS; when WLS is consistent, its
   estimate is the optimum.
 * **Regulariser** (documented weight): base parameters leave ``n_full - rank`` directions of ``x`` that change no
   prediction (link 1's mass on a vertical joint, masses regrouped into first moments). Without a term there the
   optimum is a set, unbounded along some of them. The regulariser acts **only** on those directions: ``N`` is an
   orthonormal basis of the null space of ``A K D`` (singular values below ``NULL_RTOL`` of the largest), ``D`` the
-  diagonal of :meth:`~estimators.consistency.PhysicalConsistency.parameter_scale` (kg, kg m, kg m^2, friction
-  bounds), ``x_prior`` :meth:`~estimators.consistency.PhysicalConsistency.prior_full` (the URDF's values for the
+  diagonal of :meth:`~estimators.arm.consistency.PhysicalConsistency.parameter_scale` (kg, kg m, kg m^2, friction
+  bounds), ``x_prior`` :meth:`~estimators.arm.consistency.PhysicalConsistency.prior_full` (the URDF's values for the
   arm model). Its weight is ``lambda = regularisation x u`` with ``u = c_ls / (N - rank)`` one chi-square unit of the
   cost (the cost change of one unit of ``sum r^2 / s^2`` when the residuals are the noise): with the default
   ``regularisation = 1e-3`` a null-space move of one prior scale is worth 1e-3 chi-square units. ``N`` leaves every
@@ -40,14 +40,14 @@ solver Clarabel (deterministic: the same problem gives the same estimate).
   the ones nearest the prior; it moves the predictions only where the constraints tie a null-space direction to an
   informed one. Then the cost can rise, by less than ``lambda`` times the regulariser's drop. Measured against the
   unregularised program: 0.01 chi-square units on the simulated UR5 (a relative 3e-6 of the cost), 0.004-0.05 on the
-  real UR5 logs (2e-7-3e-6), 0.13 on the synthetic arm of :mod:`estimators.synthetic_arm`, whose prior is a
+  real UR5 logs (2e-7-3e-6), 0.13 on the synthetic arm of :mod:`estimators.arm.synthetic`, whose prior is a
   placeholder (5e-5); what the data gain for it without the regulariser are link masses the torques do not see
   running off to 10^2-10^4 kg. Reported: ``regulariser_cost`` (its value at the estimate). On noise-free data
   (``c_ls`` ~ 0) ``u`` is floored at ``U_FLOOR`` of the largest curvature, to keep the objective finite.
 * **Scaling**: the objective is solved in chi-square units (divided by ``u``), so the solver's tolerances are
   fractions of the noise's chi-square whatever the cost's unit; each link's pseudo-inertia is the variable ``J_hat``
   with ``J = T J_hat T``, ``T = sqrt(m) diag(s, s, s, 1)``
-  (:meth:`~estimators.consistency.PhysicalConsistency.link_congruence`): a congruence, so ``J_hat >= 0`` exactly when
+  (:meth:`~estimators.arm.consistency.PhysicalConsistency.link_congruence`): a congruence, so ``J_hat >= 0`` exactly when
   ``J >= 0``, with entries of order one.
 * **Solver**: Clarabel (gap and feasibility tolerances ``CLARABEL_TOLERANCE``); if it fails (an error or a status
   other than optimal / optimal_inaccurate) the program is solved again by SCS, and the estimate says so
@@ -69,21 +69,19 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from estimators.arm.consistency import PhysicalConsistency, pseudo_inertia
+from estimators.arm.linear_ls import _linear, group_weighted
+from estimators.arm.linear_problem import LinearIdentificationProblem
 from estimators.base import Estimator, SearchResult
-from estimators.consistency import PhysicalConsistency, pseudo_inertia
-from estimators.linear_ls import _linear, group_weighted
-from estimators.linear_problem import LinearIdentificationProblem
 from estimators.options import check_float
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 
 try:  # an optional dependency until it is in every lock: the registry must load without it
     import cvxpy as cp
 except ImportError:  # pragma: no cover - exercised only where cvxpy is missing
     cp = None
-
-FloatArray = NDArray[np.float64]
 
 #: singular values of ``A K D`` below this fraction of the largest span the unidentified directions
 NULL_RTOL = 1e-8
@@ -133,7 +131,7 @@ def _consistency(problem: LinearIdentificationProblem) -> PhysicalConsistency:
 
 def _variable_map(consistency: PhysicalConsistency) -> FloatArray:
     """``X`` (n_full, V): ``x = X v`` for the stacked variables ``v`` = [each link's ``J_hat`` flattened row-major (16
-    each), friction, free] (:meth:`~estimators.consistency.PhysicalConsistency.scaled_pseudo_inertia_map`)."""
+    each), friction, free] (:meth:`~estimators.arm.consistency.PhysicalConsistency.scaled_pseudo_inertia_map`)."""
     n_links, n_friction, n_free = consistency.n_links, len(consistency.friction_columns), len(consistency.free_columns)
     out = np.zeros((consistency.n_full, 16 * n_links + n_friction + n_free))
     for link, (columns, block) in enumerate(zip(consistency.link_columns, consistency.scaled_pseudo_inertia_map(), strict=True)):

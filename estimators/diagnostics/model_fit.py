@@ -1,0 +1,382 @@
+"""Fitting one model on a log and scoring the fit: the gyro's residual, the star tracker's channel, plausibility.
+
+Part of the diagnosis (:mod:`estimators.diagnostics.diagnose`): :func:`fit_model` fits a model (both channels
+together when the log has attitude), :class:`ModelFit` holds its figures.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.stats import chi2, norm
+
+from estimators.attitude_channel import AttitudeChannel, AttitudeNoise
+from estimators.base import Estimator
+from estimators.estimate import Estimate
+from estimators.least_squares import LevenbergMarquardt
+from estimators.parameters import WithEffects
+from estimators.problem import IdentificationModel, IdentificationProblem
+from spaceid_gym.arrays import FloatArray
+from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.files import jsonable
+from spaceid_gym.log import MeasurementLog
+
+#: a candidate is named only if it explains at least this fraction of the baseline's excess over the noise
+EXPLAINED_FRACTION = 0.3
+
+
+def explained_fraction(lr_statistic: float, excess: float) -> float:
+    """Share of the baseline's ``excess`` chi-square over the noise (``X_baseline - (n - k)``) that a candidate's
+    likelihood ratio ``lr_statistic`` removes, capped at 1: a candidate that brings the fit down to the noise
+    or below explains all of it, including when the baseline is already at the noise in aggregate
+    (``excess <= 0``: a weak effect that only the directed likelihood-ratio test sees)."""
+    if lr_statistic <= 0.0:
+        return 0.0
+    return 1.0 if excess <= lr_statistic else lr_statistic / excess
+
+
+@dataclass(kw_only=True)
+class CandidateScores:
+    """A candidate fit's scores against the baseline (filled in once every model is fitted; ``nan`` until then):
+    ``bic``, ``delta_bic`` (to the baseline), ``lr_statistic``, ``p_value``, ``significant``,
+    ``explained_fraction`` (of the baseline's excess over the noise, :func:`explained_fraction`) and
+    ``attitude_p_value`` (of the star tracker's chi-square against its count, chi-square with that many degrees
+    of freedom; ``nan`` without attitude)."""
+
+    bic: float = math.nan
+    delta_bic: float = math.nan
+    lr_statistic: float = math.nan
+    p_value: float = math.nan
+    significant: bool = False
+    explained_fraction: float = math.nan
+    attitude_p_value: float = math.nan
+
+    def scores(self) -> dict[str, Any]:
+        """The scores as a JSON-able dict."""
+        return {
+            "bic": self.bic,
+            "delta_bic": self.delta_bic,
+            "lr_statistic": self.lr_statistic,
+            "p_value": self.p_value,
+            "significant": self.significant,
+            "explained_fraction": self.explained_fraction,
+            "attitude_p_value": self.attitude_p_value,
+        }
+
+
+@dataclass(frozen=True)
+class ChannelWeights:
+    """The noise of the two channels, which weights them in a joint fit: the gyro's per-sample std (rad/s, per
+    axis) and the attitude residual's error model (:class:`~estimators.attitude_channel.AttitudeNoise`)."""
+
+    gyro_std_rad_s: float
+    attitude: AttitudeNoise
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"gyro_std_rad_s": self.gyro_std_rad_s, **self.attitude.to_dict()}
+
+
+@dataclass
+class ModelFit(CandidateScores):
+    """One model fitted to the log and its scores.
+
+    Attributes:
+        effects: the model's effects (the baseline's plus the candidate).
+        effect: the candidate added (``None`` for the baseline).
+        theta: the fitted unknowns (k,); ``names`` their names.
+        rss: sum of squared gyro residuals, (rad/s)^2; ``n_residuals`` 3T; ``n_params`` k.
+        attitude_chi2: the attitude channel's ``-2 log L`` at the fit under the error model refitted there
+            (``attitude_noise``), less the log-determinant of the error model of the channel's weights
+            (:meth:`~estimators.attitude_channel.AttitudeChannel.profile_chi2`): a chi-square over
+            ``n_attitude_values`` values whose differences between fits are profile likelihood ratios (``None``
+            without attitude in the log).
+        physical: the fitted quantities (base and effects), as in the estimate file.
+        implausible: reasons why the fitted effect is not physical (empty if plausible).
+        wall_time_s: time of the fit.
+        chi2: both channels' chi-square (:func:`_score`); ``residual_consistent``: whether the fit's gyro residual
+            passes every test of :func:`~estimators.diagnostics.residuals.analyse_residuals` (``None``: not analysed).
+        attitude_white_p: p-value of the attitude residual, whitened by its error model, against unit white noise in
+            the effects' band (:func:`low_frequency_p_value`): small when the attitude source's errors are not what
+            the model assumes (``nan``: no attitude).
+    """
+
+    effects: tuple[str, ...]
+    effect: str | None
+    theta: FloatArray
+    names: tuple[str, ...]
+    rss: float
+    n_residuals: int
+    n_params: int
+    attitude_chi2: float | None
+    n_attitude_values: int
+    physical: dict[str, Any]
+    implausible: list[str]
+    wall_time_s: float
+    chi2: float = math.nan  # filled in by :func:`diagnose` once every model is fitted
+    residual_consistent: bool | None = None  # filled in by :func:`diagnose` for the significant and plausible ones
+    attitude_white_p: float = math.nan  # the whitened attitude residual's low-frequency test (:func:`low_frequency_p_value`)
+    attitude_noise: AttitudeNoise | None = None  # the attitude error model refitted at this fit
+
+    @property
+    def residual_rms_rad_s(self) -> float:
+        """RMS of the gyro residual (rad/s)."""
+        return math.sqrt(self.rss / self.n_residuals)
+
+    @property
+    def plausible(self) -> bool:
+        return not self.implausible
+
+    @property
+    def spec(self) -> str:
+        """The candidate's effect with its options as the model has it (``"slosh[model=pendulum]"``)."""
+        return next(s for s in reversed(self.effects) if s.partition("[")[0] == self.effect)
+
+    @property
+    def nameable(self) -> bool:
+        """Significant and plausible: a candidate the verdict may name (scores from :func:`_score`)."""
+        return self.significant and self.plausible
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able summary."""
+        return {
+            "effect": self.effect,
+            "effects": list(self.effects),
+            "n_params": self.n_params,
+            "residual_rms_rad_s": self.residual_rms_rad_s,
+            "rss": self.rss,
+            "attitude_chi2": self.attitude_chi2,
+            "chi2": self.chi2,
+            "residual_consistent": self.residual_consistent,
+            "attitude_white_p": self.attitude_white_p,
+            **self.scores(),
+            "plausible": self.plausible,
+            "implausible": list(self.implausible),
+            "parameters": {n: float(v) for n, v in zip(self.names, self.theta, strict=True)},
+            "physical": jsonable(self.physical),
+            "wall_time_s": self.wall_time_s,
+        }
+
+
+def fit_model(
+    model: IdentificationModel,
+    log: MeasurementLog,
+    estimator: Estimator | None = None,
+    starts: list[FloatArray] | None = None,
+    effect: str | None = None,
+    weights: ChannelWeights | None = None,
+    channel: AttitudeChannel | None = None,
+    problem: IdentificationProblem | None = None,
+    profile_noise: bool = False,
+) -> tuple[ModelFit, Estimate | None]:
+    """Fit ``model`` to ``log``: with ``estimator`` (returns its estimate), or by least squares from each of ``starts``.
+
+    From ``starts``: least squares on the gyro residuals from each start. With ``weights`` and a log with attitude,
+    the result that is best on both channels is then refined on the likelihood of both,
+    ``|gyro residual|^2 / sigma_gyro^2 + |attitude residual|^2 / sigma_st^2`` (at most :data:`MAX_ITERATIONS`
+    residual evaluations); otherwise the best on the gyro is kept. ``channel``: ``model``'s attitude channel on
+    ``log`` if the caller has built it already (else built here when ``weights`` are given); ``problem``: ``model``'s
+    problem on ``log``, likewise. ``profile_noise``: the attitude error model is a nuisance refitted at this model's
+    fit (and the fit refined under it), so that the fits' ``attitude_chi2`` differ by profile likelihood ratios
+    (:meth:`~estimators.attitude_channel.AttitudeChannel.profile_chi2`); else ``weights``' error model is
+    taken as known.
+    """
+    begin = time.perf_counter()
+    problem = model.problem(log) if problem is None else problem
+    if weights is None:
+        channel = None
+    elif channel is None:
+        channel = AttitudeChannel.of(model, log)
+    estimate = None
+    if estimator is not None:
+        estimate = estimator.fit_problem(problem)
+        theta = estimate.theta
+    else:
+        if not starts:
+            raise SpaceIdInputError("fit_model: give an estimator or at least one start")
+        polish = LevenbergMarquardt(max_iterations=MAX_ITERATIONS)
+        results = [polish.polish(problem, start).theta for start in starts]
+        if channel is not None:
+            assert weights is not None
+            # the gyro's minimum nearest each start, the best of them by both channels, refined on both; then the
+            # attitude error model refitted at this model's fit and the fit refined under it (profile likelihood)
+            tried = [*results, *(np.clip(x, problem.parameters.lower, problem.parameters.upper) for x in starts)]
+            scores = [_joint_chi2(problem, channel, weights, x) for x in tried]
+            theta = _joint_fit(problem, channel, weights, tried[int(np.argmin(scores))])
+            if profile_noise:
+                own = ChannelWeights(weights.gyro_std_rad_s, channel.estimate_noise(theta, weights.attitude))
+                theta = _joint_fit(problem, channel, own, theta)
+        else:
+            scores = [float(r @ r) for r in (problem.residuals(x, count=False) for x in results)]
+            theta = results[int(np.argmin(scores))]
+    attitude_chi2, attitude_information, attitude_white_p, noise = None, None, math.nan, None
+    if channel is not None:
+        assert weights is not None
+        if not profile_noise:
+            noise = weights.attitude
+        elif estimator is None:
+            noise = own.attitude
+        else:
+            noise = channel.estimate_noise(theta, weights.attitude)
+        whitened = channel.residuals(theta, noise)
+        attitude_chi2 = channel.profile_chi2(theta, noise, weights.attitude)
+        attitude_information = channel.fisher(theta, noise)
+        attitude_white_p = low_frequency_p_value(whitened.reshape(-1, 3), ATTITUDE_BLOCK_S / float(np.mean(np.diff(log.t_s))))
+    n_attitude = 0 if channel is None else channel.n_values
+    fit = _scored(problem, theta, model, effect, (attitude_chi2, n_attitude), attitude_information, weights)
+    fit.wall_time_s = time.perf_counter() - begin
+    fit.attitude_white_p = attitude_white_p
+    fit.attitude_noise = noise
+    return fit, estimate
+
+
+#: accepted least-squares steps per start of a candidate fit
+MAX_ITERATIONS = 30
+
+#: block length (s) of the low-frequency test of the whitened attitude residual (:func:`low_frequency_p_value`):
+#: the band below ~0.5 Hz where the effects act
+ATTITUDE_BLOCK_S = 1.0
+
+
+def low_frequency_p_value(whitened: FloatArray, block_samples: float) -> float:
+    """p-value of the whitened residual (n, c) having no more power in its block sums than unit white noise.
+
+    Blocks of ``round(block_samples)`` samples (at least 1); each block's sum over the square root of its length
+    is standard normal under the error model, so their squares add up to a chi-square with one degree of freedom
+    per block and column. Only the upper tail counts: what matters is power the model does not expect where the
+    effects act (slow), not a misfit at short lags (the midpoint rule against a servo's motion between samples)."""
+    size = max(round(block_samples), 1)
+    n_blocks = whitened.shape[0] // size
+    if n_blocks < 1:
+        return 1.0
+    sums = whitened[: n_blocks * size].reshape(n_blocks, size, -1).sum(axis=1) / math.sqrt(size)
+    return float(chi2.sf(float(np.sum(sums * sums)), sums.size))
+
+
+def _joint_residuals(
+    problem: IdentificationProblem, channel: AttitudeChannel, weights: ChannelWeights, theta: FloatArray
+) -> FloatArray:
+    """``[gyro residual / sigma_gyro; attitude residual / sigma_st]`` (6T,) at ``theta`` (k,)."""
+    return np.concatenate((problem.residuals(theta) / weights.gyro_std_rad_s, channel.residuals(theta, weights.attitude)))
+
+
+def _joint_chi2(problem: IdentificationProblem, channel: AttitudeChannel, weights: ChannelWeights, theta: FloatArray) -> float:
+    """The chi-square of both channels at ``theta`` (k,): what :func:`_joint_fit` minimises."""
+    r = _joint_residuals(problem, channel, weights, theta)
+    return float(r @ r)
+
+
+def _joint_fit(
+    problem: IdentificationProblem, channel: AttitudeChannel, weights: ChannelWeights, start: FloatArray
+) -> FloatArray:
+    """Least squares on both channels (:func:`_joint_residuals`) from ``start`` (k,), analytic Jacobians, in the box."""
+    params = problem.parameters
+
+    def jacobian(x: FloatArray) -> FloatArray:
+        return np.vstack((problem.jacobian(x) / weights.gyro_std_rad_s, channel.jacobian(x, weights.attitude)))
+
+    result = least_squares(
+        lambda x: _joint_residuals(problem, channel, weights, x),
+        np.clip(start, params.lower, params.upper),
+        jac=jacobian,
+        bounds=(params.lower, params.upper),
+        x_scale=params.scale,
+        method="trf",
+        max_nfev=MAX_ITERATIONS,
+    )
+    return np.asarray(result.x, dtype=float)
+
+
+def _scored(
+    problem: IdentificationProblem,
+    theta: FloatArray,
+    model: IdentificationModel,
+    effect: str | None,
+    attitude: tuple[float | None, int],
+    attitude_information: FloatArray | None,
+    weights: ChannelWeights | None,
+) -> ModelFit:
+    """The fit at ``theta``: gyro residual, plausibility, and ``attitude`` (its chi-square or ``None``, its values).
+
+    Plausibility allows for the Cramér-Rao covariance of the channels fitted: the gyro's (at ``weights``' gyro
+    noise when given) plus ``attitude_information`` (k, k), the star tracker's Fisher information, when given."""
+    residual = problem.residuals(theta, count=False)
+    params = problem.parameters
+    implausible: list[str] = []
+    if effect is not None:
+        assert isinstance(params, WithEffects)
+        term = next(t for t in params.terms if t.name == effect)
+        part = np.arange(params.n_params)[params.term_parts(np.arange(params.n_params))[term].astype(int)]
+        information = problem.fisher(theta, None if weights is None else weights.gyro_std_rad_s)
+        if attitude_information is not None:
+            information = information + attitude_information
+        covariance = np.linalg.pinv(information, rcond=1e-12, hermitian=True)[np.ix_(part, part)]
+        implausible = term.implausible(params.term_parts(theta)[term], covariance, params.base_part(theta))
+    return ModelFit(
+        effects=model.effects,
+        effect=effect,
+        theta=np.asarray(theta, dtype=float),
+        names=tuple(params.names),
+        rss=float(residual @ residual),
+        n_residuals=residual.size,
+        n_params=params.n_params,
+        attitude_chi2=attitude[0],
+        n_attitude_values=attitude[1],
+        physical=params.physical(theta),
+        implausible=implausible,
+        wall_time_s=0.0,
+    )
+
+
+def attitude_gyro_dependence(differences: FloatArray, gyro_residual: FloatArray, dt_s: FloatArray) -> tuple[float, float]:
+    """Whether the attitude residual's steps carry the gyro's own noise: ``(rho, p)``, the correlation of their
+    high-frequency parts and its two-sided p-value against independence.
+
+    ``differences`` (T-1, 3), rad: the attitude residual's steps (:meth:`AttitudeChannel.differences`); ``gyro_residual``
+    (T, 3), rad/s; ``dt_s`` (T-1,). The gyro's residual is taken to the same steps (mean of the step's two samples
+    times its length), then both are differenced once more: that removes what a missing effect puts in both
+    channels (slow), and leaves the noise. An independent attitude source (a star tracker, an exact attitude) gives
+    ``rho`` near 0 (``sqrt(n) rho`` standard normal); an on-board estimate fused with this gyro follows the gyro
+    between star-tracker updates, and its steps are the gyro's noise times the step: ``|rho|`` near 1.
+    """
+    gyro_steps = 0.5 * (gyro_residual[1:] + gyro_residual[:-1]) * dt_s[:, None]
+    a = np.diff(differences, axis=0).ravel()
+    b = np.diff(gyro_steps, axis=0).ravel()
+    denominator = math.sqrt(float(a @ a) * float(b @ b))
+    if denominator == 0.0:
+        return 0.0, 1.0
+    rho = float(a @ b) / denominator
+    return rho, float(2.0 * norm.sf(abs(rho) * math.sqrt(a.size)))
+
+
+#: how many of a term's grid candidates (:meth:`~estimators.models.effect_models.EffectTerm.grid`) start local fits
+GRID_STARTS = 3
+
+
+def best_of_grid(
+    problem: IdentificationProblem,
+    candidates: list[FloatArray],
+    channel: AttitudeChannel | None = None,
+    weights: ChannelWeights | None = None,
+) -> list[FloatArray]:
+    """The :data:`GRID_STARTS` candidates (each (k,)) of lowest cost, scored in one batched evaluation: the gyro's
+    chi-square, plus the attitude channel's with ``channel`` and ``weights`` (an effect may show in one channel only)."""
+    if len(candidates) <= GRID_STARTS:
+        return candidates
+    points = np.clip(np.array(candidates), problem.parameters.lower, problem.parameters.upper)
+    scores = problem.cost(points, count=False)
+    if channel is not None and weights is not None:
+        scores = scores * (3 * problem.n_samples) / weights.gyro_std_rad_s**2 + channel.chi2s(points, weights.attitude)
+    order = np.argsort(scores)
+    return [points[i] for i in order[:GRID_STARTS]]
+
+
+def difference_noise_std(residual: FloatArray) -> float:
+    """The white part of a residual's noise (T, c): ``sqrt(mean(diff^2) / 2)``, blind to slow structure (an effect's
+    residual changes little from one sample to the next, white noise fully)."""
+    steps = np.diff(np.asarray(residual, dtype=float), axis=0)
+    return float(np.sqrt(np.mean(steps * steps) / 2.0))

@@ -1,0 +1,170 @@
+"""Whiteness: autocorrelation with its white-noise band, the Ljung-Box test, cross-correlation with the inputs."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy import fft as sp_fft
+from scipy import stats
+
+from estimators.diagnostics.residuals._checks import _array, _check_lag, _check_probability, _check_same_rows, _columns
+from spaceid_gym.arrays import FloatArray
+
+
+def white_noise_band(n_samples: int, alpha: float = 0.01) -> float:
+    """Half-width ``z_{1-alpha/2} / sqrt(T)`` of the pointwise confidence band of a sample
+    auto- or cross-correlation of white noise (two-sided, level ``alpha``)."""
+    _check_probability(alpha, "white_noise_band: alpha")
+    return float(stats.norm.isf(alpha / 2.0) / math.sqrt(n_samples))
+
+
+def _centred_spectrum(x: FloatArray, n_fft: int) -> tuple[FloatArray, NDArray[np.complex128]]:
+    """Population std (C,) of the columns of ``x`` (T, C) and the real FFT of the centred columns."""
+    centred = x - x.mean(axis=0)
+    return np.sqrt(np.mean(centred**2, axis=0)), sp_fft.rfft(centred, n=n_fft, axis=0)
+
+
+def _autocorrelation_columns(x: FloatArray, max_lag: int) -> FloatArray:
+    """Sample autocorrelation (L+1, C) of the columns of ``x`` (T, C); a constant column gives 1, 0, 0, ..."""
+    n_samples = x.shape[0]
+    n_fft = sp_fft.next_fast_len(n_samples + max_lag, real=True)
+    std, spectrum = _centred_spectrum(x, n_fft)
+    acov = sp_fft.irfft(np.abs(spectrum) ** 2, n=n_fft, axis=0)[: max_lag + 1] / n_samples
+    variance = std**2
+    out = np.zeros_like(acov)
+    out[0] = 1.0
+    nonzero = variance > 0.0
+    out[:, nonzero] = acov[:, nonzero] / variance[nonzero]
+    return out
+
+
+def autocorrelation(x: ArrayLike, max_lag: int) -> FloatArray:
+    """Sample autocorrelation ``r_k = sum_t (x_t - m)(x_{t+k} - m) / sum_t (x_t - m)^2``, k = 0..L.
+
+    The biased (1/T) estimator, so ``|r_k| <= 1``; for white noise ``r_k`` (k >= 1) is approximately
+    N(0, 1/T): compare it with :func:`white_noise_band`. A constant signal gives 1, 0, 0, ...
+
+    Args:
+        x: (T,) or (T, C).
+        max_lag: L, 1 <= L < T.
+
+    Returns:
+        (L+1,) for (T,) input, (L+1, C) for (T, C).
+    """
+    a, one_d = _columns(x, "autocorrelation: x", min_rows=2)
+    acf = _autocorrelation_columns(a, _check_lag(max_lag, a.shape[0], "autocorrelation: max_lag"))
+    return acf[:, 0] if one_d else acf
+
+
+def _ljung_box_from_acf(acf: FloatArray, n_samples: int) -> tuple[FloatArray, FloatArray]:
+    lags = acf.shape[0] - 1
+    k = np.arange(1, lags + 1)
+    q = n_samples * (n_samples + 2.0) * np.sum(acf[1:] ** 2 / (n_samples - k)[:, None], axis=0)
+    return q, stats.chi2.sf(q, lags)
+
+
+def ljung_box(x: ArrayLike, lags: int) -> tuple[Any, Any]:
+    """Ljung-Box portmanteau test of whiteness: ``Q = T (T+2) sum_{k=1}^{h} r_k^2 / (T-k)``.
+
+    Under "x is white noise" Q ~ chi2(h) (h = ``lags``; no degrees of freedom are removed for fitted
+    model parameters: a physical model with a few parameters fitted to T >> h samples barely changes
+    the distribution). A small p-value says the residual has autocorrelation: structure.
+
+    Args:
+        x: (T,) or (T, C).
+        lags: h, 1 <= h < T.
+
+    Returns:
+        (Q, p_value): floats for (T,) input, (C,) arrays for (T, C).
+    """
+    a, one_d = _columns(x, "ljung_box: x", min_rows=2)
+    acf = _autocorrelation_columns(a, _check_lag(lags, a.shape[0], "ljung_box: lags"))
+    q, p = _ljung_box_from_acf(acf, a.shape[0])
+    return (float(q[0]), float(p[0])) if one_d else (q, p)
+
+
+@dataclass
+class CrossCorrelation:
+    """Cross-correlation of one residual channel with m inputs and a test per input.
+
+    Sign convention: ``ccf[j, L + k] = sum_t (r_{t+k} - mean r)(u_{j,t} - mean u_j) / (T std(r) std(u_j))``,
+    i.e. at a positive lag k the residual *follows* the input by k samples (a causal effect of the
+    input shows at k >= 0). Biased (1/T) estimator, ``|ccf| <= 1``.
+
+    The test of input j: under "the residual is white noise independent of the input" every
+    ``sqrt(T) ccf[j, k]`` is N(0, 1) whatever the input's own autocorrelation (it holds conditionally
+    on a deterministic input); ``statistic[j] = sqrt(T / variance_factor[j]) max_k |ccf[j, k]|`` and
+    ``p_value[j] = min(1, (2L+1) 2 Phi(-statistic))`` (Bonferroni over the 2L+1 lags, valid although
+    neighbouring lags are correlated). ``variance_factor`` is Bartlett's correction for a residual that
+    is itself autocorrelated, ``1 + 2 sum_{k=1}^{L} (1 - k/(L+1)) rho_r(k) rho_u(k)`` (at least 1),
+    which keeps a structured residual from correlating "significantly" with every smooth input
+    (Ljung 1999, sec. 16.6). It only sees autocorrelation up to lag L: a residual drifting more slowly
+    than that can still correlate spuriously with slow inputs, so the ranking describes, it does not
+    prove a cause. An input with zero variance has ccf 0 and p 1.
+
+    Attributes:
+        lags: (2L+1,) lag in samples, -L..L.
+        ccf: (m, 2L+1).
+        band: white-noise pointwise band ``z_{1-alpha/2} / sqrt(T)``.
+        variance_factor, statistic, p_value: (m,).
+        peak_ccf: (m,) the ccf value (signed) of largest magnitude; ``peak_lag``: (m,) its lag in samples.
+    """
+
+    lags: NDArray[np.int64]
+    ccf: FloatArray
+    band: float
+    variance_factor: FloatArray
+    statistic: FloatArray
+    p_value: FloatArray
+    peak_ccf: FloatArray
+    peak_lag: NDArray[np.int64]
+
+
+def _cross_correlation_columns(residual: FloatArray, inputs: FloatArray, max_lag: int, alpha: float) -> list[CrossCorrelation]:
+    """:class:`CrossCorrelation` of every residual column (T, C) with the inputs (T, m), via one FFT product."""
+    n_samples = residual.shape[0]
+    n_fft = sp_fft.next_fast_len(n_samples + max_lag, real=True)
+    std_r, spec_r = _centred_spectrum(residual, n_fft)
+    std_u, spec_u = _centred_spectrum(inputs, n_fft)
+    # cross[s, c, j] = sum_t r_c(t + s) u_j(t) for s = 0..L at index s and s = -L..-1 at n_fft + s
+    cross = sp_fft.irfft(spec_r[:, :, None] * np.conj(spec_u)[:, None, :], n=n_fft, axis=0)
+    lags = np.arange(-max_lag, max_lag + 1)
+    denominator = n_samples * std_r[:, None] * std_u[None, :]
+    valid = denominator > 0.0
+    ccf = np.where(valid, cross[lags % n_fft] / np.where(valid, denominator, 1.0), 0.0)  # (2L+1, C, m)
+    ccf = np.moveaxis(ccf, 0, -1)  # (C, m, 2L+1)
+    acf_r = _autocorrelation_columns(residual, max_lag)[1:]  # (L, C)
+    acf_u = _autocorrelation_columns(inputs, max_lag)[1:]  # (L, m)
+    taper = 1.0 - np.arange(1, max_lag + 1) / (max_lag + 1.0)
+    factor = np.maximum(1.0, 1.0 + 2.0 * np.einsum("k,kc,km->cm", taper, acf_r, acf_u))
+    peak_index = np.argmax(np.abs(ccf), axis=-1)
+    peak = np.take_along_axis(ccf, peak_index[..., None], axis=-1)[..., 0]
+    statistic = np.abs(peak) * np.sqrt(n_samples / factor)
+    p_value = np.where(valid, np.minimum(1.0, (2 * max_lag + 1) * 2.0 * stats.norm.sf(statistic)), 1.0)
+    band = white_noise_band(n_samples, alpha)
+    return [
+        CrossCorrelation(lags, ccf[c], band, factor[c], statistic[c], p_value[c], peak[c], lags[peak_index[c]])
+        for c in range(residual.shape[1])
+    ]
+
+
+def cross_correlation(residual: ArrayLike, inputs: ArrayLike, max_lag: int, alpha: float = 0.01) -> CrossCorrelation:
+    """Normalised cross-correlation of a residual with m inputs at lags -L..L, with a test per input.
+
+    See :class:`CrossCorrelation` for the sign convention, the band and the test.
+
+    Args:
+        residual: (T,) one channel.
+        inputs: (T, m) or (T,), e.g. joint rates dq (rad/s) and accelerations ddq (rad/s^2).
+        max_lag: L, 1 <= L < T.
+        alpha: level of the band (two-sided, pointwise).
+    """
+    r = _array(residual, "cross_correlation: residual", (1,), min_rows=2)
+    u, _ = _columns(inputs, "cross_correlation: inputs", min_rows=2)
+    _check_same_rows(r.shape[0], **{"cross_correlation: inputs": u})
+    _check_probability(alpha, "cross_correlation: alpha")
+    return _cross_correlation_columns(r[:, None], u, _check_lag(max_lag, r.shape[0], "cross_correlation: max_lag"), alpha)[0]

@@ -1,0 +1,169 @@
+"""The diagnosis's verdict: scores of the candidates against the baseline, the leader, and the candidates that
+contain or encompass it (see :mod:`estimators.diagnostics.diagnose`, step 4).
+"""
+
+from __future__ import annotations
+
+import math
+
+from scipy.stats import chi2
+
+from estimators.diagnostics.model_fit import EXPLAINED_FRACTION, ModelFit, explained_fraction
+from estimators.diagnostics.residuals import ResidualAnalysis
+from estimators.models.effect_models import EFFECT_TERMS
+
+NO_MISSING_EFFECT = "none"
+UNEXPLAINED = "unexplained"
+
+
+def _score(baseline: ModelFit, fits: list[ModelFit], alpha: float, white_std: float | None = None, extra_tests: int = 0) -> float:
+    """Fill in the scores of every fit; returns the gyro noise std used (rad/s).
+
+    The likelihood-ratio tests scale the gyro's chi-square by the best fit's residual variance; the explained
+    fractions by ``white_std`` (rad/s, :func:`difference_noise_std`; default the same variance), so that
+    structure no candidate removes (a disturbance outside the catalogue) counts in the excess over the noise
+    instead of being absorbed by it."""
+    everything = [baseline, *fits]
+    sigma2 = min(f.rss / (f.n_residuals - f.n_params) for f in everything)
+    for f in everything:
+        f.chi2 = _chi2(f, sigma2)
+    n = baseline.n_residuals + baseline.n_attitude_values
+    for f in everything:
+        f.bic = f.chi2 + f.n_params * math.log(n)
+        f.delta_bic = f.bic - baseline.bic
+        if f.attitude_chi2 is not None:
+            f.attitude_p_value = float(chi2.sf(f.attitude_chi2, f.n_attitude_values))
+    white2 = sigma2 if white_std is None else max(white_std * white_std, sigma2 * 1e-6)
+    excess = _chi2(baseline, white2) - (n - baseline.n_params)
+    for f in fits:
+        k = f.n_params - baseline.n_params
+        f.lr_statistic = baseline.chi2 - f.chi2
+        f.p_value = float(chi2.sf(max(f.lr_statistic, 0.0), k))
+        f.significant = f.p_value < alpha / max(len(fits) + extra_tests, 1)
+        f.explained_fraction = explained_fraction(_chi2(baseline, white2) - _chi2(f, white2), excess)
+    return math.sqrt(sigma2)
+
+
+def _chi2(fit: ModelFit, sigma2: float) -> float:
+    """The fit's chi-square: gyro residuals over the noise variance ``sigma2`` ((rad/s)^2), plus the attitude channel's."""
+    return fit.rss / sigma2 + (fit.attitude_chi2 or 0.0)
+
+
+def _verdict(
+    baseline: ModelFit,
+    fits: list[ModelFit],
+    analysis: ResidualAnalysis,
+    alpha: float,
+    combined: list[ModelFit] | tuple[ModelFit, ...] = (),
+) -> tuple[str, str]:
+    """The verdict and its reason (see the module docstring); ``combined``: from :func:`_fit_challengers`."""
+    named = [f for f in fits if f.nameable]
+    if named:
+        lowest = min(named, key=lambda f: f.bic)
+        leader = _leader(named, alpha)
+        best, encompassing = _prefer_encompassing(leader, named, combined, alpha)
+        explains = best.explained_fraction >= EXPLAINED_FRACTION
+        if explains or (best.residual_consistent and not best.attitude_p_value < alpha):
+            why = [
+                f"adding {best.effect} lowers the chi-square by {best.lr_statistic:.1f} (p = {best.p_value:.2g}, BIC "
+                f"{best.delta_bic:+.1f}) and "
+                + (
+                    f"explains {100 * best.explained_fraction:.0f} % of the excess over the noise"
+                    if explains
+                    else "leaves a residual consistent with the noise (gyro: every residual test passes; star tracker: "
+                    f"p = {best.attitude_p_value:.2g} against its count)"
+                )
+            ]
+            if leader is not lowest and best is leader:
+                why.append(
+                    f"it contains {lowest.effect} (lower BIC) and fits significantly better (likelihood ratio "
+                    f"{lowest.chi2 - leader.chi2:.1f}, p = {nested_p_value(lowest, leader):.2g})"
+                )
+            if encompassing:
+                why.append(encompassing)
+            return str(best.effect), "; ".join(why)
+        left = "a structured gyro residual" if best.residual_consistent is False else "a residual"
+        return UNEXPLAINED, (
+            f"the best significant candidate ({best.effect}) explains only {100 * best.explained_fraction:.0f} % of the "
+            f"excess over the noise and leaves {left} (star tracker: p = {best.attitude_p_value:.2g} against its "
+            f"count); {analysis.structure_description()}"
+        )
+    significant = [f for f in fits if f.significant]
+    if not significant and analysis.white:
+        return NO_MISSING_EFFECT, "no candidate is significant and the residual is consistent with white noise"
+    if significant:
+        rejected = "; ".join(f"{f.effect}: {', '.join(f.implausible)}" for f in significant)
+        return UNEXPLAINED, f"the significant candidates are not physical ({rejected}); {analysis.structure_description()}"
+    return UNEXPLAINED, f"no candidate is significant but the residual is structured: {analysis.structure_description()}"
+
+
+#: chi-square units a joint fit may end above the better of its two parts by rounding (see :func:`_prefer_encompassing`)
+JOINT_FIT_SLACK = 0.01
+
+
+def _leader(named: list[ModelFit], alpha: float) -> ModelFit:
+    """Of the significant and plausible candidates, the lowest BIC, or a container of it (:func:`_prefer_nesting`)."""
+    return _prefer_nesting(min(named, key=lambda f: f.bic), named, alpha)
+
+
+def _challengers(leader: ModelFit, named: list[ModelFit]) -> list[ModelFit]:
+    """The named candidates that fit better than ``leader`` (lower chi-square), neither containing the other."""
+
+    def nested(a: ModelFit, b: ModelFit) -> bool:
+        return str(a.effect) in EFFECT_TERMS[str(b.effect)].nests
+
+    return [f for f in named if f.chi2 < leader.chi2 and not nested(leader, f) and not nested(f, leader)]
+
+
+def _prefer_encompassing(
+    leader: ModelFit, named: list[ModelFit], combined: list[ModelFit] | tuple[ModelFit, ...], alpha: float
+) -> tuple[ModelFit, str]:
+    """``leader``, or a challenger that encompasses it, and a sentence saying so ("" if none does).
+
+    ``combined``: the leader fitted with each challenger (:func:`_fit_challengers`). A challenger encompasses the
+    leader when, fitted together, adding the challenger to the leader lowers the chi-square significantly, at
+    ``alpha / m`` with ``m`` the number of challengers, and adding the leader to the challenger does not, at
+    ``alpha`` (not divided: more challengers must not make "adds nothing" easier to pass); each chi-square with
+    the number of unknowns added. A joint fit that ends more than :data:`JOINT_FIT_SLACK` above the better of
+    the two alone has not found the joint optimum and decides nothing. Of several, the lowest BIC.
+    """
+    challengers = _challengers(leader, named)
+    level = alpha / max(len(challengers), 1)
+    winners = []
+    for challenger in challengers:
+        pair = (str(leader.effect), str(challenger.effect))
+        both = next((c for c in combined if c.effects[-2:] == pair), None)
+        if both is None or not both.chi2 <= min(leader.chi2, challenger.chi2) + JOINT_FIT_SLACK:
+            continue
+        if nested_p_value(leader, both) < level and nested_p_value(challenger, both) >= alpha:
+            winners.append((challenger, both))
+    if not winners:
+        return leader, ""
+    best, both = min(winners, key=lambda w: w[0].bic)
+    return best, (
+        f"it encompasses {leader.effect}: fitted together, adding {best.effect} to {leader.effect} lowers "
+        f"the chi-square by {leader.chi2 - both.chi2:.1f} (p = {nested_p_value(leader, both):.2g}) and adding "
+        f"{leader.effect} to {best.effect} by {best.chi2 - both.chi2:.1f} (p = {nested_p_value(best, both):.2g})"
+    )
+
+
+def _prefer_nesting(best: ModelFit, named: list[ModelFit], alpha: float) -> ModelFit:
+    """``best``, or a candidate that contains it as a special case (``external_torque`` contains ``initial_momentum``)
+    and fits significantly better than it (the lowest BIC of those that do).
+
+    Each container is compared with ``best`` by the likelihood ratio between the two, chi-square with the
+    difference of their unknowns when ``best`` is the truth, at ``alpha / m`` with ``m`` the number of containers
+    compared (Bonferroni over the tests made here; one in the catalogue). The other named candidates are not
+    tested here, and the screening against the baseline (:func:`_score`) is another family with its own
+    correction: dividing by them as well only cost power (``paper6`` diagnosis suite, 60 s ``external_torque``
+    logs: 84 % expected power at ``alpha / 3``, 90 % at ``alpha``, from the Fisher information of the torque).
+    """
+    containers = [f for f in named if best.effect in EFFECT_TERMS[str(f.effect)].nests]
+    better = [f for f in containers if nested_p_value(best, f) < alpha / len(containers)]
+    return min(better, key=lambda f: f.bic) if better else best
+
+
+def nested_p_value(inner: ModelFit, outer: ModelFit) -> float:
+    """p-value of the likelihood ratio ``inner.chi2 - outer.chi2`` for ``inner`` nested in ``outer``: chi-square with
+    ``outer.n_params - inner.n_params`` degrees of freedom when ``inner`` is the truth (scores from :func:`_score`)."""
+    return float(chi2.sf(max(inner.chi2 - outer.chi2, 0.0), outer.n_params - inner.n_params))
