@@ -136,6 +136,6 @@ def _compare(args: argparse.Namespace) -> None:
             "duration_s": args.duration, "wall_time_s": round(time.perf_counter() - started, 1)}  # fmt: skip
     paths = write_comparison(args.out, rows, info)
     print(paths["table"].read_text())
-    print(
-        f"{args.episodes} held-out windows x 4 methods in {info['wall_time_s']:.0f} s; wrote {', '.join(p.name for p in paths.values())}"
-    )
+    n_methods = len({r["method"] for r in rows})
+    written = ", ".join(p.name for p in paths.values())
+    print(f"{args.episodes} held-out windows x {n_methods} methods in {info['wall_time_s']:.0f} s; wrote {written}")
