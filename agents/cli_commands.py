@@ -44,7 +44,7 @@ def add_excite_arguments(sub: Any) -> None:
     train.add_argument("--timesteps", type=int, default=200_000, help="agent decisions (0.5 s each) to train for")
     train.add_argument("--algorithm", default="ppo", choices=["ppo", "sac"], help="ppo (default) or sac")
     train.add_argument(
-        "--attitude-weight", type=float, default=None, help="nats per degree of peak base attitude excursion (default 0.2)"
+        "--attitude-weight", type=float, default=None, help="nats per degree of peak base attitude excursion (default 0.05)"
     )
     train.add_argument("--envs", type=int, default=2, help="parallel envs (default 2)")
     train.add_argument("--vec-env", default="dummy", choices=["dummy", "subproc"], help="DummyVecEnv (default) or SubprocVecEnv")

@@ -19,12 +19,12 @@ from pathlib import Path
 
 import numpy as np
 
-from agents.policy import DEFAULT_TIMESTEPS, make_vec_env, train_excitation
+from agents.policy import DEFAULT_ATTITUDE_WEIGHT, DEFAULT_TIMESTEPS, make_vec_env, train_excitation
 
 
 def decisions_per_second(kind: str, n_envs: int, decisions: int) -> float:
     """Random-action decisions per second (all envs together) of one vectorised env kind."""
-    vec = make_vec_env("paper6", n_envs, kind, 0.2, 0, 900_000, 0)
+    vec = make_vec_env("paper6", n_envs, kind, DEFAULT_ATTITUDE_WEIGHT, 0, 900_000, 0)
     vec.reset()
     actions = np.random.default_rng(0).uniform(-1.0, 1.0, size=(decisions, n_envs, vec.action_space.shape[0]))
     start = time.perf_counter()

@@ -99,4 +99,10 @@ def test_compare_cli_writes_the_table_and_plots(policy_folder: Path, tmp_path: P
     assert main([*argv, "--episodes", "1", "--duration", "4", "--jobs", "1", "--out", str(out)]) == 0
     assert {"episodes.csv", "summary.csv", "table.md", "errors.png", "pareto.png"} <= {p.name for p in out.iterdir()}
     rows = [line for line in (out / "table.md").read_text().splitlines() if line.startswith("| ")]
-    assert [row.split("|")[1].strip() for row in rows[1:]] == ["random", "one_joint", "fourier", "policy", "fourier_equal_attitude"]
+    assert [row.split("|")[1].strip() for row in rows[1:]] == [
+        "random",
+        "one_joint",
+        "fourier",
+        "policy",
+        "fourier_equal_attitude",
+    ]
