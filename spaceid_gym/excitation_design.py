@@ -258,9 +258,14 @@ class _Design:
             raise SpaceIdInputError(f"excitation: the joint ranges of {robot.name} leave no room to move after the start spread")
         self.fraction = limit_fraction
 
-    def states(self, x: FloatArray) -> tuple[FloatArray, FloatArray]:
+    def states(self, x: FloatArray, t_s: FloatArray | None = None) -> tuple[FloatArray, FloatArray]:
+        """Joint angles and rates (T, n) of coefficients ``x`` on the criterion's grid or at times ``t_s``."""
+        b_q, b_dq = self.b_dq_q, self.b_dq
+        if t_s is not None:
+            b_q, b_dq, _ = self.template.basis(t_s)
+            b_q = b_q - self.template.basis(np.zeros(1))[0]
         flat = x.reshape(self.n, -1).T  # (2H, n)
-        return self.q_start + (self.b_dq_q @ flat) * self.rate, (self.b_dq @ flat) * self.rate
+        return self.q_start + (b_q @ flat) * self.rate, (b_dq @ flat) * self.rate
 
     def value_and_gradient(self, x: FloatArray) -> tuple[float, FloatArray]:
         q, dq = self.states(x)
@@ -381,9 +386,7 @@ def optimise_fourier_excitation(
     dense = np.linspace(0.0, duration_s, 3000, endpoint=False)
 
     def measured(x: FloatArray) -> ExcitationMeasures:  # on the dense grid, weighted to the env's sample rate
-        return information.measures(
-            *_dense_states(design, x, dense), samples_per_point=(duration_s / len(dense)) / control_period_s
-        )
+        return information.measures(*design.states(x, dense), samples_per_point=(duration_s / len(dense)) / control_period_s)
 
     best: tuple[float, FloatArray, FloatArray] | None = None
     starts: list[dict[str, Any]] = []
@@ -416,12 +419,6 @@ def optimise_fourier_excitation(
         peak_ratios=design.peak_ratios(x),
         wall_time_s=time.perf_counter() - started,
     )
-
-
-def _dense_states(design: _Design, x: FloatArray, t_s: FloatArray) -> tuple[FloatArray, FloatArray]:
-    b_q, b_dq, _ = design.template.basis(t_s)
-    flat = x.reshape(design.n, -1).T
-    return design.q_start + ((b_q - design.template.basis(np.zeros(1))[0]) @ flat) * design.rate, (b_dq @ flat) * design.rate
 
 
 def write_fourier_design(path: str | Path, design: FourierDesign, robot: Robot, params: str = "fuel") -> Path:
