@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import agents
 from agents.policy import ExcitationEnv, ExcitationPolicy, rate_command, train_excitation
 from estimators.problem import IdentificationModel
 from estimators.registry import make_estimator
@@ -106,3 +107,9 @@ def test_compare_cli_writes_the_table_and_plots(policy_folder: Path, tmp_path: P
         "policy",
         "fourier_equal_attitude",
     ]
+
+
+def test_agents_package_offers_the_learnt_policy_api() -> None:
+    assert agents.ExcitationPolicy is ExcitationPolicy and agents.train_excitation is train_excitation
+    with pytest.raises(AttributeError, match="no attribute 'nothing'"):
+        _ = agents.nothing  # type: ignore[attr-defined]
