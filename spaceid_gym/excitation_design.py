@@ -20,8 +20,9 @@ fuel parameters (:class:`FuelInformation`, in prior-range units) subject to, on 
 * position: ``|q_j(t) - q_j(0)| <= limit_fraction * half range_j - 0.3 rad`` (the env starts within 0.3 rad of the
   middle of each range).
 
-Torque limits are not constraints here: at these rates and accelerations the joint torques of the shipped robots stay
-far inside their URDF efforts (checked by the simulator's tests for the servo's limits).
+Torque limits are not constraints here: any motion within the servo's rate and acceleration limits keeps the joint
+torques of the shipped robots inside their URDF efforts (``tests/test_simulator.py`` checks the worst case, a new
+full-scale bang-bang rate command every step).
 
 The criterion is evaluated at the design point ``theta_0`` (half the usable fuel consumed, tank at the full-tank CoM
 unless given) with joint rates equal to the commands (the servo's 0.1 s lag neglected), on a grid of ``n_grid`` times
