@@ -15,7 +15,9 @@ Per window and method:
 * the peak base attitude excursion: the largest rotation angle of the measured attitude (star tracker, 5 arcsec
   noise) from the initial one, degrees.
 
-A fifth row, ``fourier_equal_attitude``, holds the optimised Fourier series against the policy at equal attitude
+``random_targets`` drives the arm through the policy's action space without the learning (uniform random joint
+targets every 0.5 s, :class:`~agents.policy.RandomTargets`): what the policy adds to its action space.
+``fourier_equal_attitude`` holds the optimised Fourier series against the policy at equal attitude
 excursion: on each window its amplitude is scaled by the policy's peak excursion over the full series' (at most 1,
 :func:`fourier_doc_scaled`). It is the optimised series made gentler, not a series optimised under an attitude limit.
 
@@ -38,7 +40,7 @@ import torch
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from agents.policy import HELD_OUT_FIRST_SEED, ExcitationPolicy
+from agents.policy import HELD_OUT_FIRST_SEED, ExcitationPolicy, RandomTargets
 from estimators.evaluation import quantity_errors
 from estimators.problem import IdentificationModel
 from estimators.registry import make_estimator
@@ -50,7 +52,7 @@ from spaceid_gym.robots import load_robot
 from spaceid_gym.sim.mission import FuelSchedule
 
 #: the methods, in table order
-METHODS = ("random", "one_joint", "fourier", "policy", "fourier_equal_attitude")
+METHODS = ("random", "one_joint", "fourier", "policy", "random_targets", "fourier_equal_attitude")
 #: the error quantities reported (name -> unit)
 ERRORS = {"mdf": "kg", "bf": "mm", "M": "%"}
 
@@ -88,6 +90,7 @@ def _episode(task: tuple[str, int, float, dict[str, Any] | None, str | None]) ->
         methods["fourier"] = lambda: FourierRateExcitation.from_dict(fourier_doc)
     if policy_folder is not None:
         methods["policy"] = lambda: ExcitationPolicy.load(policy_folder, robot=robot.name, params="fuel")
+        methods["random_targets"] = lambda: RandomTargets(seed)
     model = IdentificationModel(robot, "fuel")
     rows: list[dict[str, Any]] = []
     if fourier_doc is not None and policy_folder is not None:  # after both: scaled to the policy's excursion

@@ -290,6 +290,32 @@ class ExcitationPolicy:
         return cls(model, metadata)
 
 
+class RandomTargets:
+    """The policy's action space without the learning: uniform random targets every :data:`DECISION_PERIOD_S`,
+    followed like the policy's (:func:`rate_command`); a :class:`~spaceid_gym.datasets.FeedbackExcitation`.
+
+    It tells what the learnt policy adds to its action space. Draws from ``numpy.random.default_rng(seed)``.
+    """
+
+    def __init__(self, seed: int) -> None:
+        self.seed = seed
+        self._env: FreeFloatingIDEnv | None = None
+
+    def start(self, env: FreeFloatingIDEnv) -> None:
+        self._env = env.unwrapped if isinstance(env.unwrapped, FreeFloatingIDEnv) else env
+        self._hold = max(1, round(DECISION_PERIOD_S / self._env.control_period_s))
+        self._rng, self._step = np.random.default_rng(self.seed), 0
+        self._target = np.zeros(self._env.robot.n_joints, dtype=np.float32)
+
+    def act(self, observation: NDArray[np.float32]) -> NDArray[np.float32]:
+        if self._env is None:
+            raise SpaceIdInputError("random targets: call start(env) after the env's reset, before act()")
+        if self._step % self._hold == 0:
+            self._target = self._rng.uniform(-1.0, 1.0, size=self._target.shape).astype(np.float32)
+        self._step += 1
+        return rate_command(self._target, observation[: self._env.robot.n_joints], self._env.robot)
+
+
 class _ProgressBar(BaseCallback):
     """A tqdm progress bar over the training's timesteps (stable-baselines3's own needs ``rich``)."""
 

@@ -105,6 +105,7 @@ def test_compare_cli_writes_the_table_and_plots(policy_folder: Path, tmp_path: P
         "one_joint",
         "fourier",
         "policy",
+        "random_targets",
         "fourier_equal_attitude",
     ]
 
