@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from agents.cli_commands import add_excite_arguments, excitation_source, run_excite
 from estimators.diagnostics.compare import compare, model_from_estimate
 from estimators.diagnostics.plots import plot_correlations, plot_overlay, plot_residuals
 from estimators.diagnostics.suite import (
@@ -49,7 +50,6 @@ from spaceid_gym.arm_cli import (
 from spaceid_gym.datasets import simulate_episode, write_episode_dataset
 from spaceid_gym.demo import run_demo
 from spaceid_gym.errors import SpaceIdInputError
-from spaceid_gym.excitation import FourierExcitation
 from spaceid_gym.files import write_json_atomic
 from spaceid_gym.limits import check_count, check_log_size, max_jobs
 from spaceid_gym.log import MeasurementLog
@@ -136,6 +136,13 @@ def _parser() -> argparse.ArgumentParser:
         metavar="SPEC",
         help="hidden physical effects, e.g. 'slosh,delay[delay_s=0.03],gyro_bias[magnitude=1e-4]' "
         "(initial_momentum, gyro_bias, payload, slosh, delay, external_torque, gyro_scale; see spaceid_gym.effects)",
+    )
+    sim.add_argument(
+        "--excitation",
+        type=Path,
+        default=None,
+        help="joint motion: an optimised Fourier JSON ('spaceid excite fourier') or a policy folder ('spaceid excite "
+        "train'); default the random multi-sine of --seed",
     )
     sim.add_argument("--out", type=Path, required=True, help="dataset folder to write")
 
@@ -235,6 +242,7 @@ def _parser() -> argparse.ArgumentParser:
     demo.add_argument("--out", type=Path, default=Path("demo-output"), help="output folder (default demo-output)")
     demo.add_argument("--robot", default="paper6")
     demo.add_argument("--seed", type=int, default=3)
+    add_excite_arguments(sub)
     return parser
 
 
@@ -265,6 +273,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             _diagnose_or_report(args)
         elif args.command == "diagnose-suite":
             return _diagnose_suite(args)
+        elif args.command == "excite":
+            run_excite(args)
         elif args.command == "arm":
             ARM_COMMANDS[args.arm_command](args)
         elif args.command == "demo":
@@ -289,7 +299,7 @@ def _simulate(args: argparse.Namespace) -> None:
         if args.tank is not None
         else FuelSchedule().draw_tank_position(robot.base_full, np.random.default_rng(args.seed))
     )
-    excitation = FourierExcitation(robot.n_joints, seed=args.seed)
+    excitation, excitation_info = excitation_source(args.excitation, robot, args.seed)
     start = time.perf_counter()
     env = simulate_episode(
         robot,
@@ -302,7 +312,7 @@ def _simulate(args: argparse.Namespace) -> None:
         control_period_s=1.0 / args.rate,
         hidden_effects=args.hidden_effects,
     )
-    dataset = write_episode_dataset(args.out, env, {"seed": args.seed, "excitation": {"kind": "fourier", "seed": args.seed}})
+    dataset = write_episode_dataset(args.out, env, {"seed": args.seed, "excitation": excitation_info})
     truth = dataset.truth or {}
     effects = ", ".join(env.effects.names)
     print(

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -25,12 +25,25 @@ from spaceid_gym.sim.sensors import SensorModel
 Excitation = Callable[[float], NDArray[np.float32]]
 
 
+@runtime_checkable
+class FeedbackExcitation(Protocol):
+    """An excitation that chooses each command from what it sees (e.g. a learnt policy, :mod:`agents.policy`).
+
+    :func:`simulate_episode` calls ``start(env)`` after the env's reset, then ``act(observation)`` every control
+    period with the env's latest observation; ``act`` returns the normalised joint-rate command (n,).
+    """
+
+    def start(self, env: FreeFloatingIDEnv) -> None: ...
+
+    def act(self, observation: NDArray[np.float32]) -> NDArray[np.float32]: ...
+
+
 def simulate_episode(
     robot: Robot,
     duration_s: float,
     fuel_consumed_kg: float,
     tank_position_m: NDArray[np.float64],
-    excitation: Excitation,
+    excitation: Excitation | FeedbackExcitation,
     seed: int,
     sensors: SensorModel | None = None,
     control_period_s: float = 0.02,
@@ -39,7 +52,8 @@ def simulate_episode(
     """Run one identification window in :class:`FreeFloatingIDEnv` and return the env after it.
 
     The env's :meth:`~FreeFloatingIDEnv.measurement_log` and ``fisher_information`` then describe
-    the window. All noise comes from the env's generator seeded with ``seed``. ``hidden_effects``:
+    the window. All noise comes from the env's generator seeded with ``seed``. ``excitation``: a function of time
+    or a :class:`FeedbackExcitation`. ``hidden_effects``:
     a :class:`~spaceid_gym.effects.HiddenEffects` or a spec string (drawn from the seed), see the
     env; :func:`write_episode_dataset` then writes them to truth.json (``hidden_effects``).
     """
@@ -51,7 +65,12 @@ def simulate_episode(
         tank_position_m=tank_position_m,
         hidden_effects=hidden_effects,
     )
-    env.reset(seed=seed, options={"fuel_consumed_kg": fuel_consumed_kg})
+    observation, _ = env.reset(seed=seed, options={"fuel_consumed_kg": fuel_consumed_kg})
+    if isinstance(excitation, FeedbackExcitation):
+        excitation.start(env)
+        for _ in range(n_steps):
+            observation = env.step(excitation.act(observation))[0]
+        return env
     for k in range(n_steps):
         env.step(excitation(k * control_period_s))
     return env

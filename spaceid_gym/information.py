@@ -1,5 +1,10 @@
 """Fisher information: one routine for the env's reward, the Cramér-Rao bound and excitation checks.
 
+:func:`excitation_measures` gives the project's one set of excitation measures (D-optimality, the largest
+Cramér-Rao std, the condition number of the scaled information) for a window and a parameterisation: the envs
+(``excitation_measures()`` of both), the excitation optimiser, the comparison of excitations and the estimators'
+"insufficient excitation" check (through :func:`cramer_rao_std`) all use it.
+
 For measurements ``y_t = f_t(theta) + e_t`` with white Gaussian noise of std ``sigma`` per
 component, the Fisher information is ``F = sum_t J_t^T J_t / sigma^2`` with ``J_t = df_t/dtheta``.
 The Cramér-Rao bound on any unbiased estimate is ``cov >= F^{-1}``.
@@ -7,10 +12,13 @@ The Cramér-Rao bound on any unbiased estimate is ``cov >= F^{-1}``.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from numba import njit
 
 from spaceid_gym.arrays import FloatArray
+from spaceid_gym.errors import SpaceIdInputError
 
 
 def fisher_information(jacobians: FloatArray, noise_std: float) -> FloatArray:
@@ -68,3 +76,60 @@ def add_information(information: FloatArray, jacobian: FloatArray, inverse_varia
         for i in range(j + 1, k):
             chol[i, j] = (updated[i, j] - np.sum(chol[i, :j] * chol[j, :j])) / chol[j, j]
     return updated, 2.0 * total
+
+
+@dataclass(frozen=True)
+class ExcitationMeasures:
+    """How well a window of data excites a parameterisation: the one set of measures of the project.
+
+    Computed by :func:`excitation_measures` from the Fisher information in *scaled* units (each parameter divided by
+    its scale, e.g. its prior range), so that the measures do not depend on the parameters' physical units.
+
+    Attributes:
+        d_optimality: ``log det F_s`` (nats; D-optimality, larger is better); ``-inf`` if ``F_s`` is singular.
+        max_cramer_rao_std: the largest Cramér-Rao std in units of its scale, ``max_i sqrt((F_s^{-1})_ii)``
+            (smaller is better; ``inf`` where a direction is not informed, see :func:`cramer_rao_std`).
+        condition_number: ``lambda_max / lambda_min`` of ``F_s`` (1 is isotropic; ``inf`` if singular). This is the
+            square of the condition number of the scaled, noise-weighted regressor (the arm's standard, ``cond(W_b)``).
+        cramer_rao_std: per parameter, in the parameters' physical units (scaled std times the scale), shape (k,).
+    """
+
+    d_optimality: float
+    max_cramer_rao_std: float
+    condition_number: float
+    cramer_rao_std: FloatArray
+
+    def to_dict(self) -> dict[str, float | list[float]]:
+        """JSON-ready values (``inf`` as ``float('inf')``; :mod:`json` writes it as ``Infinity``)."""
+        return {
+            "d_optimality": self.d_optimality,
+            "max_cramer_rao_std": self.max_cramer_rao_std,
+            "condition_number": self.condition_number,
+            "cramer_rao_std": self.cramer_rao_std.tolist(),
+        }
+
+
+def excitation_measures(information_scaled: FloatArray, scale: FloatArray | None = None) -> ExcitationMeasures:
+    """The excitation measures (:class:`ExcitationMeasures`) of a Fisher information in scaled units.
+
+    Args:
+        information_scaled: ``F_s = S F S`` (k, k), ``F`` the information about the physical parameters and ``S =
+            diag(scale)``; the data's alone (no prior), symmetric positive semi-definite.
+        scale: the parameters' scales (k,), e.g. prior ranges, in their physical units; default ones.
+    """
+    information = np.asarray(information_scaled, dtype=float)
+    if information.ndim != 2 or information.shape[0] != information.shape[1] or not np.isfinite(information).all():
+        raise SpaceIdInputError(f"information: expected a finite square matrix, got shape {information.shape}")
+    k = information.shape[0]
+    scale_array = np.ones(k) if scale is None else np.asarray(scale, dtype=float)
+    if scale_array.shape != (k,) or not (scale_array > 0).all():
+        raise SpaceIdInputError(f"scale: expected {k} positive scales, got {scale_array.tolist()}")
+    symmetric = 0.5 * (information + information.T)
+    eigenvalues = np.linalg.eigvalsh(symmetric)
+    if eigenvalues[0] > 0.0:
+        d_optimality = float(np.sum(np.log(eigenvalues)))
+        condition = float(eigenvalues[-1] / eigenvalues[0])
+    else:
+        d_optimality, condition = -np.inf, np.inf
+    std_scaled = cramer_rao_std(symmetric)
+    return ExcitationMeasures(d_optimality, float(std_scaled.max()), condition, std_scaled * scale_array)

@@ -16,7 +16,7 @@ from spaceid_gym.effects import HiddenEffects, parse_effect_spec, parse_hidden_e
 from spaceid_gym.envs.actions import checked_action
 from spaceid_gym.envs.render import RobotRenderer, base_half_extents_from_inertia
 from spaceid_gym.errors import SpaceIdInputError
-from spaceid_gym.information import add_information, cramer_rao_std
+from spaceid_gym.information import ExcitationMeasures, add_information, cramer_rao_std, excitation_measures
 from spaceid_gym.log import MeasurementLog
 from spaceid_gym.mission import FuelSchedule
 from spaceid_gym.physics.fuel import base_after_fuel, base_params10_fuel_jacobian, check_fuel
@@ -307,6 +307,12 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         """
         # rank decisions in the prior-scaled units (kg and m are not comparable), then back to SI
         return cramer_rao_std(self._fisher - np.eye(4)) * self._param_scale
+
+    def excitation_measures(self) -> ExcitationMeasures:
+        """The episode's excitation measures so far (:func:`spaceid_gym.information.excitation_measures`): the gyro
+        data's information about the fuel parameters in units of their prior ranges (the prior taken out); the
+        Cramér-Rao stds in kg and m."""
+        return excitation_measures(self._fisher - np.eye(4), self._param_scale)
 
     # ------------------------------------------------------------------ internals
     def _draw_effects(self, fuel_consumed_kg: float) -> HiddenEffects:

@@ -20,7 +20,7 @@ from spaceid_gym.arm.torque_simulator import ArmSensorModel, ArmSimulator, Param
 from spaceid_gym.arrays import FloatArray
 from spaceid_gym.envs.actions import checked_action
 from spaceid_gym.errors import SpaceIdInputError
-from spaceid_gym.information import add_information, cramer_rao_std
+from spaceid_gym.information import ExcitationMeasures, add_information, cramer_rao_std, excitation_measures
 
 #: the default identification window: 3750 steps, 30 s at 125 Hz (the registered ``max_episode_steps``)
 WINDOW_STEPS = 3750
@@ -296,6 +296,11 @@ class ManipulatorIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         From the data alone (the prior taken out); ``inf`` where the data do not inform.
         """
         return cramer_rao_std(self._fisher - np.eye(self.base.rank)) * self._scale
+
+    def excitation_measures(self) -> ExcitationMeasures:
+        """The episode's excitation measures so far (:func:`spaceid_gym.information.excitation_measures`): the torque
+        data's information about the base parameters in units of their prior std (the prior taken out)."""
+        return excitation_measures(self._fisher - np.eye(self.base.rank), self._scale)
 
     # ------------------------------------------------------------------ internals
     def _safe_acceleration(self, command: FloatArray) -> FloatArray:
