@@ -25,6 +25,7 @@ from spaceid_gym.arm.cli_commands import (
 )
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.excitation import FourierExcitation
+from spaceid_gym.executors import ExecutorSpec, add_executor_arguments, executor_from_arguments
 from spaceid_gym.limits import check_count, check_log_size, max_jobs
 from spaceid_gym.sim.sensors import ARCSEC_RAD, ATTITUDE_SOURCES, SensorModel
 from spaceid_gym.variations import AXIS_VALUES
@@ -156,7 +157,7 @@ def _parser() -> argparse.ArgumentParser:
     ev.add_argument("--settings", type=int, default=200, help="number of true settings (default 200)")
     ev.add_argument("--seed", type=int, default=0)
     ev.add_argument("--duration", type=float, default=60.0, help="window length, s (default 60)")
-    ev.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
+    add_executor_arguments(ev)
     ev.add_argument(
         "--budget-reference",
         default="improved-pso",
@@ -188,7 +189,7 @@ def _parser() -> argparse.ArgumentParser:
         help="with --matrix: pin axes, e.g. 'robot=paper6,rate_hz=50' (axes: robot, rate_hz, attitude, noise_scale, "
         "excitation, size_factor, slosh_model, slosh_period_s)",
     )
-    suite.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
+    add_executor_arguments(suite)
     suite.add_argument("--out", type=Path, required=True, help="output folder")
 
     arm = sub.add_parser("arm", help="fixed-base manipulators (UR5): simulate, identify, cross-validate, diagnose")
@@ -400,7 +401,7 @@ def _diagnose_suite(args: argparse.Namespace) -> int:
         write_suite,
     )
 
-    check_count(args.jobs, "--jobs", max_jobs())
+    executor = executor_from_arguments(args, max_jobs())
     check_count(args.seeds, "--seeds")
     if args.first_seed < 0:
         raise SpaceIdInputError(f"--first-seed: expected an integer >= 0, got {args.first_seed}")
@@ -412,14 +413,15 @@ def _diagnose_suite(args: argparse.Namespace) -> int:
     if not effects:
         raise SpaceIdInputError(f"--effects: expected at least one of {', '.join(SUITE_EFFECTS)}")
     runs = {"seeds": args.seeds, "first_seed": args.first_seed, "effects": list(effects), "duration_s": args.duration}
+    runs["executor"] = executor.describe()
     if args.matrix:
-        return _diagnose_matrix(args, effects, runs)
+        return _diagnose_matrix(args, effects, runs, executor)
     if args.fix is not None:
         raise SpaceIdInputError("--fix: pins axes of the variation matrix; give --matrix too")
     robot = args.robot or "paper6"
     magnitudes = parse_magnitudes(args.magnitude, effects, robot, range(args.first_seed, args.first_seed + args.seeds))
     info: dict[str, object] = {"robot": robot, **runs, "magnitudes": magnitudes, "excitation": DIAGNOSTIC_EXCITATION}
-    rows = _timed_run(info, lambda: run_suite(robot, effects, args.seeds, args.first_seed, args.jobs, args.duration, magnitudes))
+    rows = _timed_run(info, lambda: run_suite(robot, effects, args.seeds, args.first_seed, executor, args.duration, magnitudes))
     return _report_suite(rows, write_suite(args.out, rows, info), info)
 
 
@@ -434,7 +436,7 @@ def _timed_run(info: dict[str, object], run: Callable[[], list[dict[str, object]
     return rows
 
 
-def _diagnose_matrix(args: argparse.Namespace, effects: tuple[str, ...], runs: dict[str, object]) -> int:
+def _diagnose_matrix(args: argparse.Namespace, effects: tuple[str, ...], runs: dict[str, object], executor: ExecutorSpec) -> int:
     """``diagnose-suite --matrix``: the variation matrix, written to ``--out`` (``runs``: the seeds, effects and
     duration, for ``summary.json``)."""
     from estimators.diagnostics.suite import run_matrix, write_matrix
@@ -447,7 +449,7 @@ def _diagnose_matrix(args: argparse.Namespace, effects: tuple[str, ...], runs: d
     except SpaceIdInputError as exc:
         raise SpaceIdInputError(f"--fix: {exc}") from None
     info: dict[str, object] = {"matrix": True, **runs, "fixed": fixed, "axis_values": AXIS_VALUES, "axis_ranges": AXIS_RANGES}
-    rows = _timed_run(info, lambda: run_matrix(effects, args.seeds, args.first_seed, args.jobs, args.duration, fixed))
+    rows = _timed_run(info, lambda: run_matrix(effects, args.seeds, args.first_seed, executor, args.duration, fixed))
     return _report_suite(rows, write_matrix(args.out, rows, info), info)
 
 
@@ -456,7 +458,9 @@ def _report_suite(rows: list[dict[str, object]], paths: dict[str, Path], info: d
     from estimators.diagnostics.suite import failed_rows
 
     print(paths["table"].read_text())
-    print(f"{len(rows)} logs in {info['wall_time_s']:.0f} s; wrote {', '.join(p.name for p in paths.values())}")
+    print(
+        f"{len(rows)} logs in {info['wall_time_s']:.1f} s ({info.get('executor', 'serial')}); wrote {', '.join(p.name for p in paths.values())}"
+    )
     failed = failed_rows(rows)
     for row in failed:
         print(
@@ -487,19 +491,30 @@ def _evaluate(args: argparse.Namespace) -> None:
     from spaceid_gym.robots import load_robot
 
     check_count(args.settings, "--settings")
-    check_count(args.jobs, "--jobs", max_jobs())
+    executor = executor_from_arguments(args, max_jobs())
     robot = load_robot(args.robot)
     check_log_size(args.duration, 0.02, robot.n_joints, "--duration")
     specs = parse_estimator_specs(args.estimators)
     settings = draw_settings(robot, args.settings, args.seed)
     start = time.perf_counter()
     rows = run_evaluation(
-        args.robot, specs, settings, budget_reference=args.budget_reference or None, duration_s=args.duration, jobs=args.jobs
+        args.robot,
+        specs,
+        settings,
+        budget_reference=args.budget_reference or None,
+        duration_s=args.duration,
+        executor=executor,
+        seed=args.seed,
     )
-    paths = write_results(args.out, rows, settings_info(args.robot, settings, args.seed, args.duration, 0.02))
+    wall_s = time.perf_counter() - start
+    info = settings_info(args.robot, settings, args.seed, args.duration, 0.02) | {
+        "executor": executor.describe(),
+        "wall_time_s": wall_s,
+    }
+    paths = write_results(args.out, rows, info)
     print(paths["table"].read_text())
     print(
-        f"{len(settings)} settings x {len(specs)} estimators in {time.perf_counter() - start:.0f} s; wrote {', '.join(p.name for p in paths.values())}"
+        f"{len(settings)} settings x {len(specs)} estimators in {wall_s:.1f} s ({executor.describe()}); wrote {', '.join(p.name for p in paths.values())}"
     )
 
 
