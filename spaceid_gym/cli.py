@@ -28,6 +28,7 @@ from spaceid_gym.excitation import FourierExcitation
 from spaceid_gym.executors import ExecutorSpec, add_executor_arguments, executor_from_arguments
 from spaceid_gym.limits import check_count, check_log_size, max_jobs
 from spaceid_gym.sim.sensors import ARCSEC_RAD, ATTITUDE_SOURCES, SensorModel
+from spaceid_gym.tracking import add_track_arguments, run_track
 from spaceid_gym.variations import AXIS_VALUES
 
 
@@ -203,6 +204,10 @@ def _parser() -> argparse.ArgumentParser:
         arm_sub.add_parser("diagnose", help="find the missing joint term (friction, armature, offset) and where the model fails")
     )
 
+    add_track_arguments(
+        sub.add_parser("track", help="track the fuel through a multi-window mission with the ukf, against hybrid")
+    )
+
     demo = sub.add_parser("demo", help="the whole loop available so far on the built-in robot")
     demo.add_argument("--out", type=Path, default=Path("demo-output"), help="output folder (default demo-output)")
     demo.add_argument("--robot", default="paper6")
@@ -237,6 +242,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             _diagnose_or_report(args)
         elif args.command == "diagnose-suite":
             return _diagnose_suite(args)
+        elif args.command == "track":
+            run_track(args)
         elif args.command == "arm":
             ARM_COMMANDS[args.arm_command](args)
         elif args.command == "demo":
