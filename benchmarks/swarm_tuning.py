@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from estimators.evaluation import draw_settings, parse_estimator_specs, run_evaluation, summarise
+from spaceid_gym.executors import ExecutorSpec
 from spaceid_gym.robots import load_robot
 
 REFERENCE = "hybrid"
@@ -56,7 +57,9 @@ def main() -> None:
         print("note: seed 0 draws the README's evaluation settings; options chosen on them are not held out", file=sys.stderr)
     specs = [s for s in parse_estimator_specs(args.estimators) if s != REFERENCE]
     settings = draw_settings(load_robot(args.robot), args.settings, args.seed)
-    rows = run_evaluation(args.robot, [*specs, REFERENCE], settings, budget_reference=None, jobs=args.jobs)
+    rows = run_evaluation(
+        args.robot, [*specs, REFERENCE], settings, budget_reference=None, executor=ExecutorSpec("processes", args.jobs)
+    )
     by_estimator: dict[str, dict[int, dict[str, Any]]] = defaultdict(dict)
     for row in rows:
         by_estimator[row["estimator"]][row["setting"]] = row

@@ -7,7 +7,7 @@ of each, every run on a fresh problem):
 * the streaming filter, one pass (:meth:`~estimators.ukf.UKFTracker.update` sample by sample): cost per sample
   and how many times faster than real time the log's sample rate it runs (the per-log set-up of the arm's terms,
   one composite-inertia computation per sample, included, as in the fits);
-* ``ukf`` ``fit`` on the window (``passes`` tempered passes, default 6);
+* ``ukf`` ``fit`` on the window (the global start, then ``passes`` tempered passes, default 6);
 * the reference: one ``lm`` fit of the same window (least squares from the default start, analytic Jacobian),
   and the ratios of both ``ukf`` figures to it.
 

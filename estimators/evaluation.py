@@ -22,6 +22,12 @@ Settings: fuel consumed ``mdf ~ U(initial, usable)`` of :class:`~spaceid_gym.mis
 :class:`~spaceid_gym.excitation.FourierExcitation` seeded per setting; the default
 :class:`~spaceid_gym.sim.sensors.SensorModel` noise.
 
+Seeds: setting ``i``'s estimators run with the seed ``job_seeds(seed, n_settings)[i]``
+(:func:`spaceid_gym.executors.job_seeds`, ``numpy.random.SeedSequence(seed).spawn``), every estimator of the
+setting with the same one; its window's noise, initial pose and excitation with the setting's own ``seed``. The
+settings run as independent jobs on an :class:`~spaceid_gym.executors.ExecutorSpec` (in-process, local processes,
+Dask), with bit-identical results whichever.
+
 Equal budgets: with ``budget_reference`` (default ``"improved-pso"``), every other estimator with
 a ``max_evaluations`` option gets, per setting, the evaluations the reference used on that window.
 """
@@ -30,14 +36,12 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Iterator, Sequence
-from concurrent.futures import ProcessPoolExecutor
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from tqdm import tqdm
 
 from estimators.base import Estimator
 from estimators.problem import IdentificationModel, IdentificationProblem
@@ -46,6 +50,7 @@ from spaceid_gym.arrays import FloatArray
 from spaceid_gym.datasets import simulate_episode
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.excitation import FourierExcitation
+from spaceid_gym.executors import ExecutorSpec, job_seeds, run_jobs
 from spaceid_gym.files import write_csv_atomic, write_text_atomic
 from spaceid_gym.mission import FuelSchedule
 from spaceid_gym.robots import Robot, load_robot
@@ -115,6 +120,7 @@ class _Job:
     budget_reference: str | None
     duration_s: float
     control_period_s: float
+    estimator_seed: int = 0
 
 
 def evaluate_setting(job: _Job) -> list[dict[str, Any]]:
@@ -139,9 +145,11 @@ def evaluate_setting(job: _Job) -> list[dict[str, Any]]:
     budget: float | None = None
     rows = []
     for spec in order:
-        estimator = estimator_from_spec(spec)
+        estimator = estimator_from_spec(spec, seed=job.estimator_seed)
         if budget is not None and "max_evaluations" in estimator.get_params():
-            estimator = estimator_from_spec(spec, max_evaluations=budget)  # built again so the option is validated
+            estimator = estimator_from_spec(
+                spec, seed=job.estimator_seed, max_evaluations=budget
+            )  # built again so the option is validated
         estimate = estimator.fit_problem(problem)
         if spec == job.budget_reference:
             budget = estimate.n_evaluations
@@ -152,6 +160,7 @@ def evaluate_setting(job: _Job) -> list[dict[str, Any]]:
                 "setting": s.index,
                 "seed": s.seed,
                 "estimator": spec,
+                "estimator_seed": job.estimator_seed,
                 "true_fuel_consumed_kg": s.fuel_consumed_kg,
                 "true_tank_x_m": s.tank_position_m[0],
                 "true_tank_y_m": s.tank_position_m[1],
@@ -208,32 +217,26 @@ def run_evaluation(
     budget_reference: str | None = "improved-pso",
     duration_s: float = 60.0,
     control_period_s: float = 0.02,
-    jobs: int = 1,
+    executor: ExecutorSpec | None = None,
+    seed: int = 0,
     progress: bool = True,
 ) -> list[dict[str, Any]]:
-    """Rows (one per setting and estimator) of :func:`evaluate_setting` over ``settings``, with a progress bar."""
+    """Rows (one per setting and estimator, in the settings' order) of :func:`evaluate_setting` over ``settings``,
+    run on ``executor`` (default: serial), with a progress bar; ``seed`` gives the estimators' per-setting seeds
+    (see the module docstring)."""
     for spec in specs:
         estimator_from_spec(spec)  # bad names and options fail before any simulation
     load_robot(robot)
     reference = budget_reference if budget_reference in specs else None
-    work = [_Job(robot, s, tuple(specs), reference, duration_s, control_period_s) for s in settings]
-    bar = tqdm(total=len(work), desc="evaluate", unit="setting", disable=not progress)
-    rows: list[dict[str, Any]] = []
-    try:
-        for result in _map(work, jobs):
-            rows.extend(result)
-            bar.update()
-    finally:
-        bar.close()
-    return rows
-
-
-def _map(work: list[_Job], jobs: int) -> Iterator[list[dict[str, Any]]]:
-    if jobs <= 1:
-        yield from map(evaluate_setting, work)
-        return
-    with ProcessPoolExecutor(max_workers=jobs) as pool:
-        yield from pool.map(evaluate_setting, work)
+    seeds = job_seeds(seed, len(settings))
+    work = [
+        _Job(robot, s, tuple(specs), reference, duration_s, control_period_s, estimator_seed)
+        for s, estimator_seed in zip(settings, seeds, strict=True)
+    ]
+    results = run_jobs(
+        evaluate_setting, work, executor or ExecutorSpec("serial"), desc="evaluate", unit="setting", progress=progress
+    )
+    return [row for rows in results for row in rows]
 
 
 def summarise(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:

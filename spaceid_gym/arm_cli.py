@@ -30,7 +30,9 @@ from spaceid_gym.arm.friction import FRICTION_TERMS
 from spaceid_gym.arm.robot import load_arm
 from spaceid_gym.arm.torque_simulator import INTERNAL_RATE_HZ, SAMPLE_RATE_HZ, ArmSensorModel
 from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.executors import add_executor_arguments, executor_from_arguments
 from spaceid_gym.files import write_json_atomic, write_text_atomic
+from spaceid_gym.limits import max_jobs
 
 _EFFORTS = {"torque": "torque_Nm", "current": "current_A"}
 
@@ -148,6 +150,7 @@ def add_arm_cross_validate_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--compare-without-friction", action="store_true", help="also fit the model without friction (the error friction removes)"
     )
+    add_executor_arguments(parser)
 
 
 def add_arm_diagnose_arguments(parser: argparse.ArgumentParser) -> None:
@@ -252,6 +255,7 @@ def run_arm_identify(args: argparse.Namespace) -> None:
 def run_arm_cross_validate(args: argparse.Namespace) -> None:
     """``spaceid arm cross-validate``: leave one movement out, for each estimator (and without friction if asked);
     writes ``table.md`` and ``rows.json`` and prints the per-model, per-estimator means."""
+    executor = executor_from_arguments(args, max_jobs())
     preparation, logs, floors = _movements(args, _names(args.movements))
     specs = parse_estimator_specs(args.estimators)
     estimators = {spec: estimator_from_spec(spec, seed=args.seed) for spec in specs}
@@ -260,7 +264,7 @@ def run_arm_cross_validate(args: argparse.Namespace) -> None:
     if args.compare_without_friction:
         models["without friction"] = _model(args, ())
     start = time.perf_counter()
-    rows = leave_one_out(models, logs, estimators, preparation, floors)
+    rows = leave_one_out(models, logs, estimators, preparation, floors, executor)
     joint_names = [f"joint {j + 1}" for j in range(next(iter(models.values())).n_joints)]
     args.out.mkdir(parents=True, exist_ok=True)
     summary = summary_table(rows)
@@ -273,9 +277,13 @@ def run_arm_cross_validate(args: argparse.Namespace) -> None:
             "summary": summary,
             "rows": [r.to_dict() for r in rows],
             "wall_time_s": time.perf_counter() - start,
+            "executor": executor.describe(),
         },
     )
-    print(f"leave one movement out over {len(logs)} movements in {time.perf_counter() - start:.0f} s; mean held-out error (%):")
+    print(
+        f"leave one movement out over {len(logs)} movements in {time.perf_counter() - start:.1f} s ({executor.describe()}); "
+        "mean held-out error (%):"
+    )
     for entry in summary:
         cells = " ".join(f"{v:6.1f}" for v in entry["mean_relative_percent"])
         excess = entry["max_cost_excess_over_sdp"]

@@ -50,12 +50,14 @@ from spaceid_gym.arm_cli import (
 from spaceid_gym.datasets import simulate_episode, write_episode_dataset
 from spaceid_gym.demo import run_demo
 from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.executors import ExecutorSpec, add_executor_arguments, executor_from_arguments
 from spaceid_gym.files import write_json_atomic
 from spaceid_gym.limits import check_count, check_log_size, max_jobs
 from spaceid_gym.log import MeasurementLog
 from spaceid_gym.mission import FuelSchedule
 from spaceid_gym.robots import load_robot
 from spaceid_gym.sim.sensors import ARCSEC_RAD, ATTITUDE_SOURCES, SensorModel
+from spaceid_gym.tracking import add_track_arguments, run_track
 from spaceid_gym.variations import AXIS_RANGES, AXIS_VALUES, parse_fixed
 
 
@@ -192,7 +194,7 @@ def _parser() -> argparse.ArgumentParser:
     ev.add_argument("--settings", type=int, default=200, help="number of true settings (default 200)")
     ev.add_argument("--seed", type=int, default=0)
     ev.add_argument("--duration", type=float, default=60.0, help="window length, s (default 60)")
-    ev.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
+    add_executor_arguments(ev)
     ev.add_argument(
         "--budget-reference",
         default="improved-pso",
@@ -224,7 +226,7 @@ def _parser() -> argparse.ArgumentParser:
         help="with --matrix: pin axes, e.g. 'robot=paper6,rate_hz=50' (axes: robot, rate_hz, attitude, noise_scale, "
         "excitation, size_factor, slosh_model, slosh_period_s)",
     )
-    suite.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
+    add_executor_arguments(suite)
     suite.add_argument("--out", type=Path, required=True, help="output folder")
 
     arm = sub.add_parser("arm", help="fixed-base manipulators (UR5): simulate, identify, cross-validate, diagnose")
@@ -236,6 +238,10 @@ def _parser() -> argparse.ArgumentParser:
     )
     add_arm_diagnose_arguments(
         arm_sub.add_parser("diagnose", help="find the missing joint term (friction, armature, offset) and where the model fails")
+    )
+
+    add_track_arguments(
+        sub.add_parser("track", help="track the fuel through a multi-window mission with the ukf, against hybrid")
     )
 
     demo = sub.add_parser("demo", help="the whole loop available so far on the built-in robot")
@@ -275,6 +281,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _diagnose_suite(args)
         elif args.command == "excite":
             run_excite(args)
+        elif args.command == "track":
+            run_track(args)
         elif args.command == "arm":
             ARM_COMMANDS[args.arm_command](args)
         elif args.command == "demo":
@@ -409,7 +417,7 @@ def _diagnose_or_report(args: argparse.Namespace) -> None:
 def _diagnose_suite(args: argparse.Namespace) -> int:
     """Runs the suite (or with ``--matrix`` the variation matrix) and writes it; exit code 1 (after writing) if the
     diagnosis of any log raised."""
-    check_count(args.jobs, "--jobs", max_jobs())
+    executor = executor_from_arguments(args, max_jobs())
     check_count(args.seeds, "--seeds")
     if args.first_seed < 0:
         raise SpaceIdInputError(f"--first-seed: expected an integer >= 0, got {args.first_seed}")
@@ -421,14 +429,15 @@ def _diagnose_suite(args: argparse.Namespace) -> int:
     if not effects:
         raise SpaceIdInputError(f"--effects: expected at least one of {', '.join(SUITE_EFFECTS)}")
     runs = {"seeds": args.seeds, "first_seed": args.first_seed, "effects": list(effects), "duration_s": args.duration}
+    runs["executor"] = executor.describe()
     if args.matrix:
-        return _diagnose_matrix(args, effects, runs)
+        return _diagnose_matrix(args, effects, runs, executor)
     if args.fix is not None:
         raise SpaceIdInputError("--fix: pins axes of the variation matrix; give --matrix too")
     robot = args.robot or "paper6"
     magnitudes = parse_magnitudes(args.magnitude, effects, robot, range(args.first_seed, args.first_seed + args.seeds))
     info: dict[str, object] = {"robot": robot, **runs, "magnitudes": magnitudes, "excitation": DIAGNOSTIC_EXCITATION}
-    rows = _timed_run(info, lambda: run_suite(robot, effects, args.seeds, args.first_seed, args.jobs, args.duration, magnitudes))
+    rows = _timed_run(info, lambda: run_suite(robot, effects, args.seeds, args.first_seed, executor, args.duration, magnitudes))
     return _report_suite(rows, write_suite(args.out, rows, info), info)
 
 
@@ -441,7 +450,7 @@ def _timed_run(info: dict[str, object], run: Callable[[], list[dict[str, object]
     return rows
 
 
-def _diagnose_matrix(args: argparse.Namespace, effects: tuple[str, ...], runs: dict[str, object]) -> int:
+def _diagnose_matrix(args: argparse.Namespace, effects: tuple[str, ...], runs: dict[str, object], executor: ExecutorSpec) -> int:
     """``diagnose-suite --matrix``: the variation matrix, written to ``--out`` (``runs``: the seeds, effects and
     duration, for ``summary.json``)."""
     if args.robot is not None or args.magnitude is not None:
@@ -451,14 +460,16 @@ def _diagnose_matrix(args: argparse.Namespace, effects: tuple[str, ...], runs: d
     except SpaceIdInputError as exc:
         raise SpaceIdInputError(f"--fix: {exc}") from None
     info: dict[str, object] = {"matrix": True, **runs, "fixed": fixed, "axis_values": AXIS_VALUES, "axis_ranges": AXIS_RANGES}
-    rows = _timed_run(info, lambda: run_matrix(effects, args.seeds, args.first_seed, args.jobs, args.duration, fixed))
+    rows = _timed_run(info, lambda: run_matrix(effects, args.seeds, args.first_seed, executor, args.duration, fixed))
     return _report_suite(rows, write_matrix(args.out, rows, info), info)
 
 
 def _report_suite(rows: list[dict[str, object]], paths: dict[str, Path], info: dict[str, object]) -> int:
     """Print the table and the logs that failed; exit code 1 if any did."""
     print(paths["table"].read_text())
-    print(f"{len(rows)} logs in {info['wall_time_s']:.0f} s; wrote {', '.join(p.name for p in paths.values())}")
+    print(
+        f"{len(rows)} logs in {info['wall_time_s']:.1f} s ({info.get('executor', 'serial')}); wrote {', '.join(p.name for p in paths.values())}"
+    )
     failed = failed_rows(rows)
     for row in failed:
         print(
@@ -486,19 +497,30 @@ def _read_json(path: Path) -> dict:
 
 def _evaluate(args: argparse.Namespace) -> None:
     check_count(args.settings, "--settings")
-    check_count(args.jobs, "--jobs", max_jobs())
+    executor = executor_from_arguments(args, max_jobs())
     robot = load_robot(args.robot)
     check_log_size(args.duration, 0.02, robot.n_joints, "--duration")
     specs = parse_estimator_specs(args.estimators)
     settings = draw_settings(robot, args.settings, args.seed)
     start = time.perf_counter()
     rows = run_evaluation(
-        args.robot, specs, settings, budget_reference=args.budget_reference or None, duration_s=args.duration, jobs=args.jobs
+        args.robot,
+        specs,
+        settings,
+        budget_reference=args.budget_reference or None,
+        duration_s=args.duration,
+        executor=executor,
+        seed=args.seed,
     )
-    paths = write_results(args.out, rows, settings_info(args.robot, settings, args.seed, args.duration, 0.02))
+    wall_s = time.perf_counter() - start
+    info = settings_info(args.robot, settings, args.seed, args.duration, 0.02) | {
+        "executor": executor.describe(),
+        "wall_time_s": wall_s,
+    }
+    paths = write_results(args.out, rows, info)
     print(paths["table"].read_text())
     print(
-        f"{len(settings)} settings x {len(specs)} estimators in {time.perf_counter() - start:.0f} s; wrote {', '.join(p.name for p in paths.values())}"
+        f"{len(settings)} settings x {len(specs)} estimators in {wall_s:.1f} s ({executor.describe()}); wrote {', '.join(p.name for p in paths.values())}"
     )
 
 

@@ -32,6 +32,10 @@ LAZY_THIRD_PARTY: dict[tuple[str, str], str] = {
     ("estimators.reference", "cma"): "importing cma takes ~1.5 s; only the cma-es estimator needs it",
     ("estimators.reference", "pyswarms"): "importing pyswarms takes ~0.8 s; only the pyswarms-local estimator needs it",
     ("estimators.evaluation", "matplotlib"): "pyplot (~0.7 s) for the evaluation's plots only, after selecting Agg",
+    (
+        "spaceid_gym.executors",
+        "distributed",
+    ): "Dask is an optional extra; only --executor dask needs it, and its absence gives a clear message",
 }
 
 

@@ -12,7 +12,7 @@ import pytest
 from scipy.stats import chi2
 
 from agents.excitation import FourierExcitation
-from estimators.evaluation import estimator_from_spec
+from estimators.evaluation import draw_settings, estimator_from_spec
 from estimators.problem import IdentificationModel
 from estimators.registry import available_estimators, make_estimator
 from estimators.ukf import FilterDivergedError, UnscentedKalman, difference_noise_std
@@ -53,6 +53,42 @@ def fits(paper6: Robot) -> list[dict[str, np.ndarray]]:
     return out
 
 
+#: random true settings of the robustness test, drawn as the evaluation harness draws them (seed 123: not the seed
+#: of benchmarks/ukf_settings.py, whose 30 settings served the design)
+N_RANDOM_SETTINGS = 8
+
+
+@pytest.fixture(scope="module")
+def random_setting_fits(paper6: Robot) -> list[dict[str, np.ndarray]]:
+    """The ukf and hybrid fits of 60 s windows of random true settings, with the Cramér-Rao std at the truth."""
+    out = []
+    for setting in draw_settings(paper6, N_RANDOM_SETTINGS, 123):
+        theta = np.array([setting.fuel_consumed_kg, *setting.tank_position_m])
+        excitation = FourierExcitation(paper6.n_joints, seed=setting.seed)
+        env = simulate_episode(paper6, 60.0, theta[0], theta[1:], excitation, seed=setting.seed)
+        model = IdentificationModel(paper6, "fuel", noise_std_rad_s=env.sensors.gyro_std_rad_s(env.control_period_s))
+        problem = model.problem(env.measurement_log())
+        crlb = problem.crlb_std(theta)
+        ukf = make_estimator("ukf", seed=setting.seed).fit_problem(problem)
+        hybrid = make_estimator("hybrid", seed=setting.seed).fit_problem(problem)
+        out.append({"z_ukf": (ukf.theta - theta) / crlb, "z_hybrid": (hybrid.theta - theta) / crlb})
+    return out
+
+
+def test_on_random_settings_the_fit_stays_in_the_global_basin_within_twice_the_bound(
+    random_setting_fits: list[dict[str, np.ndarray]],
+) -> None:
+    # where the shared global search found the truth's basin (hybrid within 4 std; it missed 1 of 30 settings of the
+    # design run), the filter stays there: every unknown within 4 Cramér-Rao std (a 6e-5 event per unknown for an
+    # efficient estimator), and the RMS fuel error over those settings within 2 std (for 8 efficient estimates the
+    # RMS exceeds 2 with probability 1e-4); before the global start 8 of 10 such windows ended far from the truth
+    found = [f for f in random_setting_fits if np.all(np.abs(f["z_hybrid"]) < 4.0)]
+    assert len(found) >= N_RANDOM_SETTINGS - 1
+    z_ukf = np.array([f["z_ukf"] for f in found])
+    assert np.all(np.abs(z_ukf) < 4.0), z_ukf
+    assert np.sqrt(np.mean(z_ukf[:, 0] ** 2)) < 2.0, z_ukf[:, 0]
+
+
 def test_nees_over_seeds_is_within_its_chi_square_bounds(fits: list[dict[str, np.ndarray]]) -> None:
     # NEES = e^T P^-1 e of the 4 unknowns is chi-square(4) for a consistent filter; the mean over the seeds
     # lies within the 99 % bounds of chi-square(4 N) / N
@@ -91,20 +127,24 @@ def test_nis_of_the_streaming_filter_is_within_its_chi_square_bounds(fuel_episod
 def test_streaming_updates_equal_a_single_pass_fit_and_the_fit_is_deterministic(short_fuel_episode: Any) -> None:
     model = IdentificationModel(short_fuel_episode.robot, "fuel", noise_std_rad_s=short_fuel_episode.noise_std_rad_s)
     problem = model.problem(short_fuel_episode.log)
-    tracker = make_estimator("ukf").tracker(problem)
+    tracker = make_estimator("ukf").tracker(problem)  # the streaming tracker starts as start="interior"
     for index in range(problem.n_samples):
         innovation = tracker.update(index)
         assert innovation.shape == (3,)
     theta, cov = tracker.estimate()
-    single = make_estimator("ukf", passes=1).fit(model, short_fuel_episode.log)
+    single = make_estimator("ukf", passes=1, start="interior").fit(model, short_fuel_episode.log)
     np.testing.assert_array_equal(single.theta, theta)
     np.testing.assert_array_equal(np.asarray(single.extra["covariance"]), cov)
     np.testing.assert_array_equal(cov, cov.T)
-    first, second = (make_estimator("ukf", passes=2).fit(model, short_fuel_episode.log) for _ in range(2))
+    first, second = (make_estimator("ukf", passes=2, start="interior").fit(model, short_fuel_episode.log) for _ in range(2))
     np.testing.assert_array_equal(first.theta, second.theta)
     assert first.extra["covariance"] == second.extra["covariance"]
     # all sigma points of a sample go through one batched prediction: (2k + 1) model samples per update and pass
     assert first.n_model_samples == 2 * (2 * 4 + 1) * problem.n_samples
+    # the global start is seeded: the same seed, the same fit
+    seeded = [make_estimator("ukf", passes=1, seed=4).fit(model, short_fuel_episode.log) for _ in range(2)]
+    np.testing.assert_array_equal(seeded[0].theta, seeded[1].theta)
+    assert seeded[0].extra["start_theta"] == seeded[1].extra["start_theta"]
 
 
 def test_random_walk_grows_the_covariance_between_windows(short_fuel_episode: Any) -> None:
@@ -151,6 +191,8 @@ def test_registered_in_the_registry_the_spec_parser_and_the_cli(tmp_path: Path) 
         ({"initial_std_fraction": -0.1}, "initial_std_fraction"),
         ({"noise_std_rad_s": 0.0}, "noise_std_rad_s"),
         ({"clip": "yes"}, "clip"),
+        ({"start": "middle"}, "start"),
+        ({"prior_inflation": 0.0}, "prior_inflation"),
     ],
 )
 def test_bad_options_are_rejected(options: dict[str, object], message: str) -> None:
@@ -181,7 +223,7 @@ def test_effect_unknowns_join_the_state(short_fuel_episode: Any) -> None:
     model = IdentificationModel(
         short_fuel_episode.robot, "fuel", noise_std_rad_s=short_fuel_episode.noise_std_rad_s, effects="gyro_bias"
     )
-    estimate = make_estimator("ukf").fit(model, short_fuel_episode.log)  # (2 passes end in a mirrored basin here)
+    estimate = make_estimator("ukf", start="interior").fit(model, short_fuel_episode.log)  # (2 passes: a mirrored basin)
     cov = np.asarray(estimate.extra["covariance"])
     assert estimate.names[4:] == ("bias_x_rad_s", "bias_y_rad_s", "bias_z_rad_s") and cov.shape == (7, 7)
     assert np.all(np.abs(estimate.theta[4:]) < 4.0 * np.sqrt(np.diag(cov)[4:]))

@@ -38,6 +38,7 @@ from spaceid_gym.arm.real_logs import list_movements, load_ur5_movement
 from spaceid_gym.arm.signal import lowpass_zero_phase, parallel_decimation, uniform_period
 from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.executors import ExecutorSpec, run_jobs
 
 #: estimators that weigh the rows themselves (everything else gets the per-joint weights of the module docstring)
 SELF_WEIGHTING = ("ols", "wls")
@@ -286,8 +287,12 @@ def leave_one_out(
     estimators: Mapping[str, Estimator],
     preparation: Preparation,
     noise_floors: Mapping[str, FloatArray | None] | None = None,
+    executor: ExecutorSpec | None = None,
 ) -> list[CrossValidationRow]:
     """For every movement, model and estimator: fit on the other movements, error on the held-out one.
+
+    Each held-out movement is a job on ``executor`` (default: serial); the rows come in the movements' order and are
+    the same whatever the executor (the estimators carry their seeds), bar the fits' wall times.
 
     Args:
         models: label -> model (e.g. ``{"with friction": ..., "without friction": ...}``).
@@ -295,29 +300,48 @@ def leave_one_out(
         estimators: label -> estimator (e.g. ``{"ols": ..., "improved-abc (consistent)": ...}``).
         preparation: the signal chain.
         noise_floors: movement -> processed noise std (n,) when known.
+        executor: where the folds run (:mod:`spaceid_gym.executors`).
     """
     if len(logs) < 2:
         raise SpaceIdInputError(f"leave-one-out: needs at least two movements, got {list(logs)}")
     model_rows = {label: preparation.all_rows(model, logs) for label, model in models.items()}
+    floors = noise_floors or {}
+    folds = [_Fold(held, dict(models), model_rows, dict(estimators), floors.get(held)) for held in logs]
+    results = run_jobs(_run_fold, folds, executor or ExecutorSpec("serial"), desc="cross-validate", unit="fold")
+    return [row for rows in results for row in rows]
+
+
+@dataclass(frozen=True)
+class _Fold:
+    """One held-out movement of :func:`leave_one_out`: every model's processed rows and every estimator."""
+
+    held: str
+    models: dict[str, ArmIdentificationModel]
+    model_rows: dict[str, dict[str, IdentificationRows]]
+    estimators: dict[str, Estimator]
+    noise_floor: FloatArray | None
+
+
+def _run_fold(fold: _Fold) -> list[CrossValidationRow]:
+    """Fit every model and estimator on the movements but ``fold.held``; the held-out errors (a job of :func:`leave_one_out`)."""
     rows = []
-    for held in logs:
-        for model_label, model in models.items():
-            movements = model_rows[model_label]
-            train = {name: item for name, item in movements.items() if name != held}
-            for label, estimator in estimators.items():
-                estimate = fit(model, train, estimator)
-                error = prediction_error(model, estimate.theta, movements[held], (noise_floors or {}).get(held))
-                rows.append(
-                    CrossValidationRow(
-                        model_label,
-                        label,
-                        error,
-                        physically_consistent(estimate),
-                        estimate.wall_time_s,
-                        estimate.n_evaluations,
-                        estimate.extra.get("cost_excess_over_sdp"),
-                    )
+    for model_label, model in fold.models.items():
+        movements = fold.model_rows[model_label]
+        train = {name: item for name, item in movements.items() if name != fold.held}
+        for label, estimator in fold.estimators.items():
+            estimate = fit(model, train, estimator)
+            error = prediction_error(model, estimate.theta, movements[fold.held], fold.noise_floor)
+            rows.append(
+                CrossValidationRow(
+                    model_label,
+                    label,
+                    error,
+                    physically_consistent(estimate),
+                    estimate.wall_time_s,
+                    estimate.n_evaluations,
+                    estimate.extra.get("cost_excess_over_sdp"),
                 )
+            )
     return rows
 
 

@@ -25,13 +25,10 @@ import subprocess
 import time
 import traceback
 from collections import Counter
-from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from tqdm import tqdm
 
 from estimators.diagnostics.diagnose import NO_MISSING_EFFECT, diagnose
 from estimators.diagnostics.power import expected_power
@@ -43,6 +40,7 @@ from spaceid_gym.effects import MAGNITUDE_UNITS, HiddenEffects, draw_effect
 from spaceid_gym.envs.free_floating import FreeFloatingIDEnv
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.excitation import FourierExcitation
+from spaceid_gym.executors import ExecutorSpec, run_jobs
 from spaceid_gym.files import write_csv_atomic, write_json_atomic, write_text_atomic
 from spaceid_gym.robots import Robot, load_robot
 from spaceid_gym.variations import (
@@ -209,26 +207,28 @@ def run_suite(
     effects: tuple[str, ...] = SUITE_EFFECTS,
     seeds: int = 20,
     first_seed: int = 0,
-    jobs: int = 1,
+    executor: ExecutorSpec | None = None,
     duration_s: float = 60.0,
     magnitudes: dict[str, float] | None = None,
 ) -> list[dict[str, Any]]:
-    """Every effect x ``seeds`` seeds; rows in a fixed order (effect, seed), whatever ``jobs``.
+    """Every effect x ``seeds`` seeds, each log a job on ``executor`` (default: serial); rows in a fixed order
+    (effect, seed), bit-identical whatever the executor (a log's seed is ``first_seed`` plus its index).
 
     ``magnitudes``: sizes replacing some effects' defaults (:func:`parse_magnitudes`); the same seeds draw
     the same directions and fuel states at any size."""
     sizes = magnitudes or {}
     cases = [(robot_name, effect, first_seed + s, duration_s, sizes.get(effect)) for effect in effects for s in range(seeds)]
-    return _run_all(guarded_case, cases, jobs)
+    return run_jobs(_guarded_case_of, cases, executor or ExecutorSpec("serial"), desc="diagnose suite", unit="log")
 
 
-def _run_all(function: Callable[..., dict[str, Any]], cases: list[tuple[Any, ...]], jobs: int) -> list[dict[str, Any]]:
-    """``function(*case)`` for every case, in ``jobs`` worker processes (1: in this one); rows in the cases' order."""
-    if jobs == 1:
-        return [function(*case) for case in tqdm(cases, desc="diagnose suite", unit="log")]
-    with ProcessPoolExecutor(max_workers=jobs) as pool:
-        futures = [pool.submit(function, *case) for case in cases]
-        return [f.result() for f in tqdm(futures, desc="diagnose suite", unit="log")]
+def _guarded_case_of(case: tuple[Any, ...]) -> dict[str, Any]:
+    """:func:`guarded_case` of one case's arguments (a job of :func:`run_suite`)."""
+    return guarded_case(*case)
+
+
+def _guarded_variation_of(case: tuple[Any, ...]) -> dict[str, Any]:
+    """:func:`guarded_variation` of one case's arguments (a job of :func:`run_matrix`)."""
+    return guarded_variation(*case)
 
 
 def code_version() -> str:
@@ -408,16 +408,17 @@ def run_matrix(
     effects: tuple[str, ...] = SUITE_EFFECTS,
     seeds: int = 20,
     first_seed: int = 0,
-    jobs: int = 1,
+    executor: ExecutorSpec | None = None,
     duration_s: float = 60.0,
     fixed: dict[str, Any] | None = None,
 ) -> list[dict[str, Any]]:
     """The variation matrix: every effect x ``seeds`` seeds, each log's axes drawn from its seed (``fixed``: pinned,
-    checked before anything runs); rows in a fixed order (effect, seed), whatever ``jobs``. The same seed draws
+    checked before anything runs), each log a job on ``executor`` (default: serial); rows in a fixed order (effect,
+    seed), bit-identical whatever the executor. The same seed draws
     the same axes and fuel state for every effect (paired logs)."""
     pinned = checked_fixed(fixed)
     cases = [(effect, first_seed + s, duration_s, pinned) for effect in effects for s in range(seeds)]
-    return _run_all(guarded_variation, cases, jobs)
+    return run_jobs(_guarded_variation_of, cases, executor or ExecutorSpec("serial"), desc="variation matrix", unit="log")
 
 
 def summarise_matrix(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
