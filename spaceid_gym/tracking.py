@@ -4,7 +4,7 @@ fitted window by window.
 The mission (:func:`simulate_mission`): one satellite (tank position drawn once from the seed), ``windows``
 identification windows of ``duration_s`` (60 s at 50 Hz by default), each with its own Fourier excitation (seed
 ``job_seeds(seed, windows)[w]``, :func:`spaceid_gym.executors.job_seeds`); between two windows the satellite burns
-fuel as :class:`~spaceid_gym.sim.mission.FuelSchedule` draws it (5 % of the wet base mass consumed in the first
+fuel as :class:`~spaceid_gym.mission.FuelSchedule` draws it (5 % of the wet base mass consumed in the first
 window, then ``|N(2 %, 1 %)|`` per gap: 27.5 kg, then about 11 kg per gap for paper6), as the env's ``reset`` does
 between episodes.
 
@@ -69,8 +69,8 @@ from spaceid_gym.excitation import FourierExcitation
 from spaceid_gym.executors import job_seeds
 from spaceid_gym.limits import check_count, check_log_size
 from spaceid_gym.log import MeasurementLog, write_bytes_atomic, write_csv_atomic, write_json_atomic
+from spaceid_gym.mission import FuelSchedule
 from spaceid_gym.robots import load_robot
-from spaceid_gym.sim.mission import FuelSchedule
 
 FloatArray = NDArray[np.float64]
 

@@ -10,10 +10,10 @@ from typing import Any
 
 import numpy as np
 import pytest
-from estimators.arm_identification import Preparation, leave_one_out, load_movements
-from estimators.models.arm_model import ArmIdentificationModel
 
 from estimators import evaluation
+from estimators.arm.identification import Preparation, leave_one_out, load_movements
+from estimators.arm.model import ArmIdentificationModel
 from estimators.evaluation import draw_settings, estimator_from_spec, run_evaluation
 from spaceid_gym.arm.robot import load_arm
 from spaceid_gym.cli import main

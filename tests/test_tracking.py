@@ -10,9 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 from scipy.stats import chi2
-from spaceid_gym.sim.mission import FuelSchedule
 
 from spaceid_gym.cli import main
+from spaceid_gym.mission import FuelSchedule
 from spaceid_gym.tracking import mean_bounds, mission_random_walk, simulate_mission
 
 #: a mission of 60 s windows (the command's design: 20 s windows at 27.5 kg consumed inform the tank position too

@@ -13,7 +13,7 @@ band it is the ideal (sinc) band-limited delay.
 One exception: at the Nyquist frequency a real series cannot be moved by a fraction of a sample (the bin keeps the
 real part of its phase factor, ``cos(pi lag)``), so near it the ramp loses power after all. ``band`` restricts the
 delay to the content below a frequency, leaving the noise above it where it is (see
-:class:`~estimators.models.effects.Delay`).
+:class:`~estimators.models.effect_models.Delay`).
 
 Ends: the series is extended by holding its first and last values over more samples than the largest lag (a log
 that starts and ends at rest is unchanged by it), so that the circular transform does not wrap the end onto the
