@@ -4,7 +4,7 @@
 (the ``agents`` extra): importing this package imports them (a few seconds).
 """
 
-from agents.excitation import FourierExcitation
 from agents.policy import ExcitationPolicy, train_excitation
+from spaceid_gym.excitation import FourierExcitation
 
 __all__ = ["ExcitationPolicy", "FourierExcitation", "train_excitation"]

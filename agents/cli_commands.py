@@ -18,7 +18,7 @@ from agents.policy import DEFAULT_ATTITUDE_WEIGHT, ExcitationPolicy, train_excit
 from spaceid_gym.datasets import Excitation, FeedbackExcitation
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.excitation import FourierExcitation
-from spaceid_gym.excitation_design import load_fourier_excitation, optimise_fourier_excitation, write_fourier_design
+from spaceid_gym.fuel_excitation_design import load_fourier_excitation, optimise_fourier_excitation, write_fourier_design
 from spaceid_gym.limits import check_count, max_jobs
 from spaceid_gym.robots import Robot, load_robot
 

@@ -46,7 +46,7 @@ from estimators.problem import IdentificationModel
 from estimators.registry import make_estimator
 from spaceid_gym.datasets import simulate_episode
 from spaceid_gym.excitation import FourierExcitation
-from spaceid_gym.excitation_design import FourierRateExcitation, OneJointExcitation
+from spaceid_gym.fuel_excitation_design import FourierRateExcitation, OneJointExcitation
 from spaceid_gym.log import MeasurementLog, write_csv_atomic, write_text_atomic
 from spaceid_gym.mission import FuelSchedule
 from spaceid_gym.robots import load_robot

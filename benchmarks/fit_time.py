@@ -14,10 +14,10 @@ import statistics
 
 import numpy as np
 
-from agents.excitation import FourierExcitation
 from estimators.evaluation import estimator_from_spec, parse_estimator_specs
 from estimators.problem import IdentificationModel
 from spaceid_gym.datasets import simulate_episode
+from spaceid_gym.excitation import FourierExcitation
 from spaceid_gym.robots import load_robot
 
 

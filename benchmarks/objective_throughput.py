@@ -16,9 +16,9 @@ import time
 
 import numpy as np
 
-from agents.excitation import FourierExcitation
 from estimators.models import MomentumModel
 from spaceid_gym.datasets import simulate_episode
+from spaceid_gym.excitation import FourierExcitation
 from spaceid_gym.physics.fuel import base_after_fuel
 from spaceid_gym.physics.momentum import base_rate_from_joint_motion
 from spaceid_gym.robots import load_robot

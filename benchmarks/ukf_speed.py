@@ -25,11 +25,11 @@ from collections.abc import Callable
 
 import numpy as np
 
-from agents.excitation import FourierExcitation
 from estimators.problem import IdentificationModel
 from estimators.registry import make_estimator
 from estimators.ukf import UnscentedKalman
 from spaceid_gym.datasets import simulate_episode
+from spaceid_gym.excitation import FourierExcitation
 from spaceid_gym.log import MeasurementLog
 from spaceid_gym.robots import load_robot
 

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agents.excitation import FourierExcitation
 from spaceid_gym.datasets import simulate_episode
+from spaceid_gym.excitation import FourierExcitation
 from spaceid_gym.log import MeasurementLog
 from spaceid_gym.robots import Robot, load_robot
 

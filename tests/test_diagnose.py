@@ -8,7 +8,6 @@ import types
 import numpy as np
 import pytest
 
-from agents.excitation import FourierExcitation
 from estimators.attitude_channel import AttitudeChannel, AttitudeNoise
 from estimators.diagnostics.compare import compare, model_from_estimate
 from estimators.diagnostics.diagnose import (
@@ -32,6 +31,7 @@ from estimators.registry import make_estimator
 from spaceid_gym.datasets import simulate_episode
 from spaceid_gym.effects import HiddenEffects
 from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.excitation import FourierExcitation
 from spaceid_gym.robots import Robot
 from spaceid_gym.sim.sensors import SensorModel
 

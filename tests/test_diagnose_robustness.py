@@ -15,7 +15,6 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from agents.excitation import FourierExcitation
 from estimators.attitude_channel import (
     AttitudeChannel,
     AttitudeNoise,
@@ -28,6 +27,7 @@ from estimators.diagnostics.suite import DIAGNOSTIC_EXCITATION
 from estimators.diagnostics.workflow import true_parameters
 from estimators.problem import IdentificationModel
 from spaceid_gym.datasets import simulate_episode
+from spaceid_gym.excitation import FourierExcitation
 from spaceid_gym.log import MeasurementLog
 from spaceid_gym.robots import Robot, load_robot
 from spaceid_gym.sim.sensors import SensorModel

@@ -7,7 +7,6 @@ import dataclasses
 import numpy as np
 import pytest
 
-from agents.excitation import FourierExcitation
 from estimators.attitude_channel import AttitudeChannel, midpoint_log
 from estimators.models.effect_models import DELAY_BAND_HZ, EFFECT_TERMS, make_terms, parse_effects
 from estimators.models.fractional_delay import delay_samples
@@ -15,6 +14,7 @@ from estimators.problem import IdentificationModel
 from spaceid_gym.datasets import simulate_episode
 from spaceid_gym.effects import HiddenEffects, draw_effect
 from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.excitation import FourierExcitation
 from spaceid_gym.robots import Robot
 from spaceid_gym.sim.sensors import SensorModel
 

@@ -19,7 +19,7 @@ from estimators.registry import make_estimator
 from spaceid_gym.cli import main
 from spaceid_gym.datasets import simulate_episode
 from spaceid_gym.errors import SpaceIdInputError
-from spaceid_gym.excitation_design import optimise_fourier_excitation, write_fourier_design
+from spaceid_gym.fuel_excitation_design import optimise_fourier_excitation, write_fourier_design
 from spaceid_gym.log import load_dataset
 from spaceid_gym.robots import load_robot
 

@@ -12,7 +12,7 @@ from spaceid_gym.datasets import simulate_episode
 from spaceid_gym.envs.free_floating import FreeFloatingIDEnv
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.excitation import FourierExcitation
-from spaceid_gym.excitation_design import (
+from spaceid_gym.fuel_excitation_design import (
     FourierDesign,
     FuelInformation,
     OneJointExcitation,

@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agents.excitation import FourierExcitation
 from estimators.hybrid import HybridEstimator
 from estimators.least_squares import LevenbergMarquardt
 from estimators.problem import IdentificationModel, IdentificationProblem
 from estimators.reference import DifferentialEvolution
 from spaceid_gym.envs import FreeFloatingIDEnv
 from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.excitation import FourierExcitation
 from spaceid_gym.robots import Robot
 
 TRUTH_NOISE_FREE = np.array([45.0, -0.15, 0.3, 0.2])

@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agents.excitation import FourierExcitation
 from spaceid_gym.cli import main
 from spaceid_gym.datasets import simulate_episode
 from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.excitation import FourierExcitation
 from spaceid_gym.limits import check_count, check_log_size, max_log_samples
 from spaceid_gym.robots import Robot
 

@@ -8,13 +8,13 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from agents.excitation import FourierExcitation
 from estimators.base import Estimator, SearchResult
 from estimators.problem import IdentificationModel
 from estimators.registry import available_estimators, make_estimator, register_estimator
 from spaceid_gym.datasets import simulate_episode
 from spaceid_gym.envs import FreeFloatingIDEnv
 from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.excitation import FourierExcitation
 from spaceid_gym.log import MeasurementLog
 from spaceid_gym.physics.inertia import RigidBodyInertia, transform_params10
 from spaceid_gym.robots import Robot

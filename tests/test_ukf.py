@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from agents.excitation import FourierExcitation
 from estimators.evaluation import draw_settings, estimator_from_spec
 from estimators.problem import IdentificationModel
 from estimators.registry import available_estimators, make_estimator
@@ -19,6 +18,7 @@ from estimators.ukf import FilterDivergedError, UnscentedKalman, difference_nois
 from spaceid_gym.cli import main
 from spaceid_gym.datasets import simulate_episode
 from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.excitation import FourierExcitation
 from spaceid_gym.robots import Robot
 
 #: simulated 60 s windows (50 Hz) of the consistency test, seeds 0..N-1 (all of them, none left out)

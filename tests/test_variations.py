@@ -13,13 +13,13 @@ import numpy as np
 import pytest
 from suite_rows import diagnosed_row
 
-from agents.excitation import SmoothRandomExcitation
 from estimators.diagnostics import suite
 from estimators.diagnostics.power import expected_power, power_of
 from estimators.problem import IdentificationModel
 from spaceid_gym.cli import main
 from spaceid_gym.effects import DEFAULT_MAGNITUDES, remaining_liquid_kg
 from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.excitation import SmoothRandomExcitation
 from spaceid_gym.robots import load_robot
 from spaceid_gym.sim.sensors import SensorModel
 from spaceid_gym.variations import (
