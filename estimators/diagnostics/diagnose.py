@@ -84,7 +84,7 @@ from estimators.diagnostics.verdict import UNEXPLAINED as UNEXPLAINED
 from estimators.diagnostics.verdict import _challengers, _chi2, _leader, _score, _verdict, nested_p_value
 from estimators.estimate import Estimate
 from estimators.least_squares import interior_start
-from estimators.models.effect_models import EFFECT_TERMS, Slosh
+from estimators.models.effect_models import EFFECT_TERMS
 from estimators.parameters import WithEffects
 from estimators.problem import IdentificationModel
 from estimators.registry import make_estimator
@@ -298,8 +298,9 @@ def _fit_candidate(
     other_variants: Sequence[ModelFit] = (),
 ) -> ModelFit:
     """``model`` with the effect ``spec`` added, fitted from the baseline's fit, from the best of the term's grid and
-    once from the default start (a missing effect can drag the baseline far off). The grid includes, for a slosh
-    pendulum, the fits of the ``other_variants`` (the spring-mass) with the rod along each of a finer set of axes."""
+    once from the default start (a missing effect can drag the baseline far off). The grid includes the term's
+    candidates from the fits of the ``other_variants`` (:meth:`~estimators.models.effect_base.EffectTerm.grid_from_variant`:
+    a slosh pendulum from the spring-mass's fit, the rod along each of a finer set of axes)."""
     extended = candidate_model(model, spec)
     params = extended.parameters
     assert isinstance(params, WithEffects)
@@ -308,9 +309,8 @@ def _fit_candidate(
     k_base = params.base.n_params
     problem = extended.problem(log)
     grid = [np.concatenate((baseline.theta, s)) for s in term.grid(baseline.theta[:k_base])]
-    if isinstance(term, Slosh):
-        n0 = len(baseline.theta)  # the model's own unknowns (base and effects already in it), then the candidate's
-        grid += [np.concatenate((v.theta[:n0], s)) for v in other_variants for s in term.axis_grid(v.theta[n0:])]
+    n0 = len(baseline.theta)  # the model's own unknowns (base and effects already in it), then the candidate's
+    grid += [np.concatenate((v.theta[:n0], s)) for v in other_variants for s in term.grid_from_variant(v.theta[n0:])]
     starts = best_of_grid(problem, grid, None if channel is None else AttitudeChannel.of(extended, log), weights)
     starts.append(np.concatenate((restart, term.starts(restart[:k_base])[0])))
     starts.append(np.concatenate((baseline.theta, term.nominal)))  # the baseline itself: the nested model's fit

@@ -121,6 +121,11 @@ class EffectTerm(ABC):
         by default :meth:`starts` (a term whose cost is multimodal offers a scan)."""
         return self.starts(theta_base)
 
+    def grid_from_variant(self, fitted: FloatArray) -> list[FloatArray]:
+        """More candidates (k_e,) from ``fitted``, this effect's unknowns as another of its equivalent models fitted
+        them (e.g. a slosh pendulum from a spring-mass fit); none by default."""
+        return []
+
     def from_truth(self, hidden: Mapping[str, Any]) -> FloatArray:
         """This term's unknowns (k_e,) in a simulated truth: ``hidden`` is ``truth.json``'s ``hidden_effects``.
 

@@ -181,7 +181,7 @@ class Slosh(EffectTerm):
         (0.5 * math.pi, 0.0),
         *((az, math.atan(1.0 / math.sqrt(2.0))) for az in (0.25 * math.pi, 0.75 * math.pi, -0.75 * math.pi, -0.25 * math.pi)),
     )
-    #: the finer set of :meth:`axis_grid`: those seven and the six diagonals of the base's faces
+    #: the finer set of :meth:`grid_from_variant`: those seven and the six diagonals of the base's faces
     FINE_AXES = (
         *GRID_AXES,
         *((az, 0.0) for az in (0.25 * math.pi, -0.25 * math.pi)),
@@ -267,7 +267,7 @@ class Slosh(EffectTerm):
             for axis in axes
         ]
 
-    def axis_grid(self, fitted: FloatArray) -> list[FloatArray]:
+    def grid_from_variant(self, fitted: FloatArray) -> list[FloatArray]:
         """The pendulum's candidates (5,) with the mass, frequency and damping of ``fitted`` (the first three values: a
         fit of the other slosh model, whose lateral dynamics are the same) and the rod along each of
         :data:`FINE_AXES`; none for the spring."""
