@@ -60,6 +60,9 @@ def add_excite_arguments(sub: Any) -> None:
     compare.add_argument("--policy", type=Path, default=None, help="policy folder (default: the shipped one for the robot)")
     compare.add_argument("--fourier", type=Path, default=None, help="optimised Fourier JSON (default: optimise one, seed 0)")
     compare.add_argument("--episodes", type=int, default=50, help="held-out windows (default 50)")
+    compare.add_argument(
+        "--first-window", type=int, default=0, help="index of the first held-out window (default 0): a fresh set for a figure"
+    )
     compare.add_argument("--duration", type=float, default=60.0, help="window, s (default 60)")
     compare.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
     compare.add_argument("--out", type=Path, required=True, help="output folder")
@@ -113,6 +116,8 @@ def _train(args: argparse.Namespace) -> None:
 def _compare(args: argparse.Namespace) -> None:
     robot = load_robot(args.robot)
     check_count(args.episodes, "--episodes", 100_000)
+    if args.first_window < 0:
+        raise SpaceIdInputError(f"--first-window: expected an index >= 0, got {args.first_window}")
     check_count(args.jobs, "--jobs", max_jobs())
     folder = args.policy if args.policy is not None else SHIPPED_POLICIES / robot.name
     if args.policy is None and not folder.is_dir():
@@ -126,8 +131,8 @@ def _compare(args: argparse.Namespace) -> None:
         design = optimise_fourier_excitation(robot, args.duration, seed=0)
         write_fourier_design(args.out / "fourier.json", design, robot)
         fourier = design.excitation
-    rows = run_comparison(robot.name, args.episodes, fourier, folder, args.duration, args.jobs)
-    info = {"robot": robot.name, "policy": str(folder), "policy_timesteps": policy.metadata.get("timesteps"), "episodes": args.episodes,
+    rows = run_comparison(robot.name, args.episodes, fourier, folder, args.duration, args.jobs, args.first_window)
+    info = {"robot": robot.name, "policy": str(folder), "policy_timesteps": policy.metadata.get("timesteps"), "episodes": args.episodes, "first_window": args.first_window,
             "duration_s": args.duration, "wall_time_s": round(time.perf_counter() - started, 1)}  # fmt: skip
     paths = write_comparison(args.out, rows, info)
     print(paths["table"].read_text())

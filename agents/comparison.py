@@ -135,11 +135,13 @@ def run_comparison(
     policy_folder: str | Path | None,
     duration_s: float = 60.0,
     jobs: int = 1,
+    first_window: int = 0,
 ) -> list[dict[str, Any]]:
-    """Rows (one per window and method) of the comparison (module docstring); ``jobs`` worker processes."""
+    """Rows (one per window and method) of the comparison (module docstring) on held-out windows ``first_window``
+    onwards; ``jobs`` worker processes."""
     fourier_doc = None if fourier is None else fourier.to_dict()
     folder = None if policy_folder is None else str(policy_folder)
-    tasks = [(robot, i, float(duration_s), fourier_doc, folder) for i in range(episodes)]
+    tasks = [(robot, first_window + i, float(duration_s), fourier_doc, folder) for i in range(episodes)]
     if jobs <= 1:
         results = [_episode(t) for t in tasks]
     else:

@@ -5,6 +5,7 @@ Nothing here asserts on what the agent learnt: a few hundred steps are noise; th
 
 from __future__ import annotations
 
+import csv
 import json
 import math
 from pathlib import Path
@@ -13,6 +14,7 @@ import numpy as np
 import pytest
 
 import agents
+from agents.comparison import held_out_setting
 from agents.policy import ExcitationEnv, ExcitationPolicy, rate_command, train_excitation
 from estimators.problem import IdentificationModel
 from estimators.registry import make_estimator
@@ -87,6 +89,7 @@ def test_bad_policy_inputs_name_what_is_wrong(policy_folder: Path, tmp_path: Pat
         ["excite", "train", "--robot", "quick3", "--timesteps", "0", "--out", str(tmp_path / "p")],
         ["simulate", "--robot", "paper6", "--duration", "1", "--excitation", str(policy_folder), "--out", str(tmp_path / "r")],
         ["excite", "compare", "--robot", "quick3", "--policy", str(corrupt), "--episodes", "1", "--out", str(tmp_path / "c")],
+        ["excite", "compare", "--robot", "quick3", "--first-window", "-1", "--episodes", "1", "--out", str(tmp_path / "w")],
     ):
         assert main(argv) == 2
 
@@ -97,7 +100,9 @@ def test_compare_cli_writes_the_table_and_plots(policy_folder: Path, tmp_path: P
     fourier = write_fourier_design(tmp_path / "traj.json", design, robot)
     out = tmp_path / "exc"
     argv = ["excite", "compare", "--robot", "quick3", "--policy", str(policy_folder), "--fourier", str(fourier)]
-    assert main([*argv, "--episodes", "1", "--duration", "4", "--jobs", "1", "--out", str(out)]) == 0
+    assert main([*argv, "--episodes", "1", "--duration", "4", "--jobs", "1", "--first-window", "7", "--out", str(out)]) == 0
+    seed = int(next(csv.DictReader((out / "episodes.csv").open()))["seed"])
+    assert seed == held_out_setting("quick3", 7)[0]  # the windows start where asked
     assert {"episodes.csv", "summary.csv", "table.md", "errors.png", "pareto.png"} <= {p.name for p in out.iterdir()}
     rows = [line for line in (out / "table.md").read_text().splitlines() if line.startswith("| ")]
     assert [row.split("|")[1].strip() for row in rows[1:]] == [
