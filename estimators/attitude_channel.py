@@ -243,6 +243,17 @@ def _logit(phi: float) -> float:
     return math.log(phi / (MAX_CORRELATION - phi))
 
 
+def block_sums(steps: FloatArray, stride: int, axis: int = 0) -> FloatArray:
+    """Sums of ``stride`` consecutive entries of ``steps`` along ``axis`` (the steps between compared samples; the
+    last incomplete block dropped); ``steps`` itself at stride 1."""
+    if stride == 1:
+        return steps
+    steps = np.moveaxis(np.asarray(steps, dtype=float), axis, 0)
+    n_blocks = len(steps) // stride
+    summed = steps[: n_blocks * stride].reshape(n_blocks, stride, *steps.shape[1:]).sum(axis=1)
+    return np.moveaxis(summed, 0, axis)
+
+
 def midpoint_log(log: MeasurementLog) -> MeasurementLog:
     """The log's steps as samples: sample 0 as logged, then sample ``j`` (1..T-1) at the midpoint of step ``j``.
 
@@ -333,13 +344,24 @@ class AttitudeChannel:
         problem: the model bound to the log's midpoint samples (:func:`midpoint_log`), any object with
             ``base_rate(theta (P, k)) -> (P, T, 3)`` and ``base_rate_jacobian(theta (k,)) -> (3T, k)``.
         log: the log itself, with attitude quaternions.
+        stride: compare the rotations every ``stride`` samples (1: every sample). The prediction still integrates the
+            model's rate over every step; only the comparison is coarser: the residual's steps are summed over blocks
+            of ``stride`` steps (:func:`block_sums`), the last incomplete block dropped. An attitude fused on board
+            with this gyro follows the gyro's noise between star-tracker corrections; over blocks long against the
+            filter's time constant it is the star tracker's, an independent measurement again (:func:`diagnose`
+            chooses the stride).
 
     Attributes:
         measured: ``Phi`` (T, 3), rad, the star tracker's accumulated rotation, first sample's base axes.
-        n_values: ``3T - 6``, the whitened residual's values (:meth:`residuals`).
+        n_values: ``3B - 6``, the whitened residual's values (:meth:`residuals`), B the compared samples (T at stride 1).
     """
 
-    def __init__(self, problem: BaseRateProblem, log: MeasurementLog) -> None:
+    def __init__(self, problem: BaseRateProblem, log: MeasurementLog, stride: int = 1) -> None:
+        if not isinstance(stride, int | np.integer) or stride < 1 or (log.n_samples - 1) // stride < 2:
+            raise SpaceIdInputError(
+                f"attitude channel: stride expected an integer >= 1 leaving at least 2 steps of {log.n_samples - 1}, "
+                f"got {stride!r}"
+            )
         quat = log.quat_base_to_inertial_wxyz
         if quat is None:
             raise SpaceIdInputError("attitude channel: the log has no attitude quaternions (no star tracker)")
@@ -351,17 +373,24 @@ class AttitudeChannel:
         self.measured = np.concatenate((np.zeros((1, 3)), np.cumsum(increments, axis=0)))
         #: ``(A_{j-1} + A_j) / 2 * dt_j`` (T-1, 3, 3): maps the step's midpoint rate to its rotation increment
         self._step_map = 0.5 * (relative[:-1] + relative[1:]) * np.diff(np.asarray(log.t_s, dtype=float))[:, None, None]
-        self._measured_steps = increments
+        self.stride = int(stride)
+        self._measured_steps = block_sums(increments, self.stride)
         self._cached: tuple[AttitudeNoise, list[FloatArray], FloatArray | None] | None = None
         self._truncation: FloatArray | None = None
-        self.n_values = 3 * log.n_samples - 6
+        self.n_values = 3 * self.n_compared - 6
+
+    @property
+    def n_compared(self) -> int:
+        """B: the samples whose rotations are compared (every ``stride``-th, from the first)."""
+        return len(self._measured_steps) + 1
 
     @classmethod
-    def of(cls, model: IdentificationModel, log: MeasurementLog) -> AttitudeChannel | None:
-        """The channel of ``model`` on ``log``; ``None`` when the log has no attitude or fewer than 3 samples."""
+    def of(cls, model: IdentificationModel, log: MeasurementLog, stride: int = 1) -> AttitudeChannel | None:
+        """The channel of ``model`` on ``log`` at ``stride``; ``None`` when the log has no attitude or fewer than 3
+        samples."""
         if log.quat_base_to_inertial_wxyz is None or log.n_samples < 3:
             return None
-        channel = cls(model.problem(_shared_midpoint_log(log)), log)
+        channel = cls(model.problem(_shared_midpoint_log(log)), log, stride)
         if log.n_samples >= MIN_SAMPLES_FOR_TRUNCATION:
             channel.set_truncation(_shared_truncation(model, log, channel))
         return channel
@@ -374,9 +403,9 @@ class AttitudeChannel:
             raise SpaceIdInputError(
                 f"attitude channel: truncation shape expected {self.measured.shape} finite, got {shape.shape}"
             )
-        self._truncation = np.diff(shape, axis=0)
+        self._truncation = block_sums(np.diff(shape, axis=0), self.stride)
         self._cached = None
-        self.n_values = 3 * len(self.measured) - 6 - 3
+        self.n_values = 3 * self.n_compared - 6 - 3
 
     def predicted(self, theta: FloatArray) -> FloatArray:
         """``Phi_hat`` (P, T, 3), rad, for ``theta`` (P, k)."""
@@ -385,22 +414,23 @@ class AttitudeChannel:
         return np.concatenate((np.zeros((len(steps), 1, 3)), np.cumsum(steps, axis=1)), axis=1)
 
     def differences(self, theta: FloatArray) -> FloatArray:
-        """``d_k = e_k - e_{k-1}`` (T-1, 3), rad, of the residual ``e = Phi_hat - Phi`` at ``theta`` (k,)."""
+        """``d_k = e_k - e_{k-1}`` (B-1, 3), rad, of the residual ``e = Phi_hat - Phi`` at ``theta`` (k,), between
+        compared samples."""
         omega = self.problem.base_rate(np.atleast_2d(theta))[0, 1:]
-        return np.einsum("tij,tj->ti", self._step_map, omega) - self._measured_steps
+        return block_sums(np.einsum("tij,tj->ti", self._step_map, omega), self.stride) - self._measured_steps
 
     def residuals(self, theta: FloatArray, noise: AttitudeNoise) -> FloatArray:
-        """The whitened differences (3T-6,) at ``theta`` (k,): unit variance and independent under ``noise``."""
+        """The whitened differences (3B-6,) at ``theta`` (k,): unit variance and independent under ``noise``."""
         return self._project(noise.whiten(self.differences(theta), self._factors(noise)), noise).ravel()
 
     def difference_jacobian(self, theta: FloatArray) -> FloatArray:
-        """``d differences / d theta`` (T-1, 3, k) at ``theta`` (k,)."""
+        """``d differences / d theta`` (B-1, 3, k) at ``theta`` (k,)."""
         n_t = len(self.measured)
         rates = self.problem.base_rate_jacobian(np.asarray(theta, dtype=float)).reshape(n_t, 3, -1)[1:]
-        return np.einsum("tij,tjk->tik", self._step_map, rates)
+        return block_sums(np.einsum("tij,tjk->tik", self._step_map, rates), self.stride)
 
     def jacobian(self, theta: FloatArray, noise: AttitudeNoise) -> FloatArray:
-        """``d residuals / d theta`` (3T-6, k) at ``theta`` (k,)."""
+        """``d residuals / d theta`` (3B-6, k) at ``theta`` (k,)."""
         jac = self.difference_jacobian(theta)
         return self._project(noise.whiten(jac, self._factors(noise)), noise).reshape(-1, jac.shape[2])
 
@@ -412,7 +442,7 @@ class AttitudeChannel:
     def chi2s(self, thetas: FloatArray, noise: AttitudeNoise) -> FloatArray:
         """:meth:`chi2` of each row of ``thetas`` (P, k), the model evaluated once for all: (P,)."""
         omega = self.problem.base_rate(np.atleast_2d(thetas))[:, 1:]
-        differences = np.einsum("tij,ptj->pti", self._step_map, omega) - self._measured_steps
+        differences = block_sums(np.einsum("tij,ptj->pti", self._step_map, omega), self.stride, axis=1) - self._measured_steps
         factors = self._factors(noise)
         return np.array([float(np.sum(self._project(noise.whiten(d, factors), noise) ** 2)) for d in differences])
 
@@ -436,8 +466,7 @@ class AttitudeChannel:
         at ``theta`` (:meth:`estimate_noise`), differences of it between models are profile likelihood ratios: the
         error model is a nuisance refitted under each model, so a model that explains structure the error model had
         absorbed as the model's own wander gains its log-determinant, and one that explains nothing gains nothing."""
-        n_steps = len(self.measured)
-        return self.chi2(theta, noise) + noise.log_det(n_steps) - reference.log_det(n_steps)
+        return self.chi2(theta, noise) + noise.log_det(self.n_compared) - reference.log_det(self.n_compared)
 
     def _factors(self, noise: AttitudeNoise) -> list[FloatArray]:
         """The whitening factors of ``noise``, cached for the last noise model asked (with the whitened truncation)."""
@@ -448,7 +477,7 @@ class AttitudeChannel:
         return self._cached[1]
 
     def _project(self, whitened: FloatArray, noise: AttitudeNoise) -> FloatArray:
-        """``whitened`` (T-2, 3[, k]) less its projection on the whitened truncation shape, axis by axis."""
+        """``whitened`` (B-2, 3[, k]) less its projection on the whitened truncation shape, axis by axis."""
         self._factors(noise)
         assert self._cached is not None
         x = self._cached[2]

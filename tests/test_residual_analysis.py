@@ -19,6 +19,7 @@ from scipy import stats
 from estimators.diagnostics.residuals import (
     analyse_residuals,
     autocorrelation,
+    band_limited_inputs,
     cross_correlation,
     dominant_frequencies,
     failing_segments,
@@ -201,6 +202,33 @@ def test_residual_proportional_to_dq3_correlates_with_dq3_first() -> None:
     assert not analysis.correlated_inputs[0]
     assert not analysis.white and not analysis.uncorrelated_with_inputs
     assert "dq3" in analysis.structure_description()
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_measured_rate_noise_shared_by_the_prediction_is_not_taken_for_a_missing_input(seed: int) -> None:
+    """The model predicts from the measured joint rates, so their noise is in the residual; the differentiated noise
+    of ddq correlated with it one sample apart (a clean 100 Hz log, exact model, was 'correlated with ddq2'). The
+    band-limited inputs see only the motion: no correlation, while the unfiltered inputs (the old rule) find it."""
+    rng = np.random.default_rng(100 + seed)
+    t_s = np.arange(6000) * 0.01  # 100 Hz
+    q, dq_true = multisine_joints(rng, t_s=t_s)
+    dq_noise = rng.normal(0.0, 1.4e-4, dq_true.shape)
+    sensitivity = rng.normal(0.0, 0.5, (3, 6))  # d(predicted base rate)/d(joint rate), dimensionless
+    residual = rng.normal(0.0, 1.8e-4, (6000, 3)) - dq_noise @ sensitivity.T
+    band_limited = analyse_residuals(t_s, residual, np.zeros_like(residual), q, dq_true + dq_noise)
+    unfiltered = analyse_residuals(t_s, residual, np.zeros_like(residual), q, dq_true + dq_noise, input_band_hz=None)
+    assert band_limited.uncorrelated_with_inputs
+    assert not unfiltered.uncorrelated_with_inputs
+    assert any(entry["lag_samples"] == 1 for channel in unfiltered.correlated_inputs for entry in channel)
+
+
+def test_band_limited_inputs_keep_a_slow_input_and_refuse_a_bad_cutoff() -> None:
+    rng = np.random.default_rng(3)
+    _q, dq = multisine_joints(rng)
+    inputs = band_limited_inputs(dq, T_S, DT_S, 10.0)
+    np.testing.assert_allclose(inputs[50:-50, :6], dq[50:-50], atol=1e-6 * np.abs(dq).max())  # edges: padding
+    with pytest.raises(SpaceIdInputError, match="input_band_hz"):
+        band_limited_inputs(dq, T_S, DT_S, 0.0)
 
 
 # ---------------------------------------------------------------------------------------- spectrum

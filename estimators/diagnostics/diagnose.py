@@ -71,10 +71,13 @@ from estimators.diagnostics.model_fit import CandidateScores as CandidateScores
 from estimators.diagnostics.model_fit import (
     ChannelWeights,
     ModelFit,
-    attitude_gyro_dependence,
     best_of_grid,
     difference_noise_std,
     fit_model,
+    independent_attitude_channel,
+)
+from estimators.diagnostics.model_fit import (
+    attitude_gyro_dependence as attitude_gyro_dependence,
 )
 from estimators.diagnostics.model_fit import explained_fraction as explained_fraction
 from estimators.diagnostics.model_fit import low_frequency_p_value as low_frequency_p_value
@@ -213,23 +216,12 @@ def diagnose(
     if unknown:
         raise SpaceIdInputError(f"candidates: unknown effects {unknown}; expected names from {', '.join(EFFECT_TERMS)}")
     baseline, estimate = fit_model(model, log, estimator or make_estimator("hybrid"))
-    channel = AttitudeChannel.of(model, log)
-    dependence = None
-    if channel is not None:
-        gyro_residual = model.problem(log).residuals(baseline.theta, count=False).reshape(-1, 3)
-        dependence = attitude_gyro_dependence(channel.differences(baseline.theta), gyro_residual, np.diff(log.t_s))
-        if dependence[1] >= alpha:
-            dependence = None
-        else:
-            channel = None
+    independence = independent_attitude_channel(model, log, baseline.theta, alpha)
+    channel = independence.channel
     diagnosis = _diagnose(model, log, names, baseline, alpha, channel)
-    if dependence is not None:
-        diagnosis.reason = (
-            f"the attitude's steps follow the gyro's own noise (correlation {dependence[0]:+.2f} of their high-frequency "
-            f"parts, p = {dependence[1]:.2g}): an attitude estimate fused with this gyro, not an independent measurement, "
-            f"so the verdict rests on the gyro alone; {diagnosis.reason}"
-        )
-        diagnosis.attitude_rejected = True
+    if independence.stride > 1:
+        diagnosis.reason = f"{independence.describe()}; {diagnosis.reason}"
+        diagnosis.attitude_rejected = channel is None
     if channel is not None and not diagnosis.attitude_consistent:
         p_best = max(f.attitude_white_p for f in [diagnosis.baseline, *diagnosis.candidates])
         diagnosis = _diagnose(model, log, names, baseline, alpha, None)
@@ -255,14 +247,14 @@ def _diagnose(
     weights = None
     if channel is not None:
         # both channels from here on; the star tracker's noise from the data, the baseline refitted to both
-        weights = ChannelWeights(sigma0, channel.estimate_noise(baseline.theta))
+        weights = ChannelWeights(sigma0, channel.estimate_noise(baseline.theta), channel.stride)
         # the baseline refitted on both channels with its error model, twice: the second pass is what every candidate
         # gets from the baseline's state (a fit under its error model, the error model refitted, the fit refined), so
         # that no candidate gains from one more round of the alternation than the baseline had
         for _ in range(2):
             baseline = fit_model(model, log, starts=[baseline.theta], weights=weights, channel=channel, profile_noise=True)[0]
             assert baseline.attitude_noise is not None
-            weights = ChannelWeights(sigma0, baseline.attitude_noise)
+            weights = ChannelWeights(sigma0, baseline.attitude_noise, channel.stride)
         # the baseline's own error model weights every candidate's fit and is the reference of the log-determinants
         baseline.attitude_chi2 = channel.chi2(baseline.theta, weights.attitude)
     fits, variants_tried = [], 0
@@ -311,7 +303,8 @@ def _fit_candidate(
     grid = [np.concatenate((baseline.theta, s)) for s in term.grid(baseline.theta[:k_base])]
     n0 = len(baseline.theta)  # the model's own unknowns (base and effects already in it), then the candidate's
     grid += [np.concatenate((v.theta[:n0], s)) for v in other_variants for s in term.grid_from_variant(v.theta[n0:])]
-    starts = best_of_grid(problem, grid, None if channel is None else AttitudeChannel.of(extended, log), weights)
+    extended_channel = None if channel is None else AttitudeChannel.of(extended, log, channel.stride)
+    starts = best_of_grid(problem, grid, extended_channel, weights)
     starts.append(np.concatenate((restart, term.starts(restart[:k_base])[0])))
     starts.append(np.concatenate((baseline.theta, term.nominal)))  # the baseline itself: the nested model's fit
     return fit_model(extended, log, starts=starts, effect=term.name, weights=weights, problem=problem, profile_noise=True)[0]

@@ -29,8 +29,8 @@ from typing import Any
 import numpy as np
 from scipy.stats import chi2, ncx2
 
-from estimators.attitude_channel import AttitudeChannel
-from estimators.diagnostics.diagnose import DEFAULT_CANDIDATES, attitude_gyro_dependence, candidate_model
+from estimators.diagnostics.diagnose import DEFAULT_CANDIDATES, candidate_model
+from estimators.diagnostics.model_fit import independent_attitude_channel
 from estimators.diagnostics.workflow import true_parameters
 from estimators.problem import IdentificationModel
 from spaceid_gym.errors import SpaceIdInputError
@@ -46,8 +46,9 @@ def non_centrality(
 ) -> float:
     """``lambda`` of ``effect``'s likelihood ratio against ``model_without_effect`` on ``log``, at ``truth``
     (truth.json's keys: the fuel state, ``hidden_effects`` and ``noise["gyro_std_rad_s"]``); see the module docstring.
-    The attitude channel counts only where ``diagnose`` would use it: not when its steps follow the gyro's noise
-    (:func:`~estimators.diagnostics.diagnose.attitude_gyro_dependence` at the truth, at level ``alpha``).
+    The attitude channel counts as ``diagnose`` uses it: at the finest stride where its steps do not follow the
+    gyro's noise (:func:`~estimators.diagnostics.model_fit.independent_attitude_channel` at the truth, at level
+    ``alpha``), or not at all.
 
     Raises:
         SpaceIdInputError: the truth lacks the model's unknowns or the gyro's noise, or the model already has ``effect``.
@@ -69,12 +70,9 @@ def non_centrality(
         index = term.names.index(name)
         effect_off[index] = theta[k + index]
     fisher = problem.fisher(theta, float(gyro_std))
-    channel = AttitudeChannel.of(model, log)
-    if channel is not None:
-        # as diagnose: an attitude that follows this gyro's noise (a fused estimate) is no second measurement
-        gyro_residual = problem.residuals(theta, count=False).reshape(-1, 3)
-        if attitude_gyro_dependence(channel.differences(theta), gyro_residual, np.diff(log.t_s))[1] < alpha:
-            channel = None
+    # as diagnose: an attitude that follows this gyro's noise (a fused estimate) is compared at a coarser stride, or
+    # not at all
+    channel = independent_attitude_channel(model, log, theta, alpha).channel
     if channel is not None:
         # the attitude residual's error model at the truth: the source's noise and the model's own wander
         fisher = fisher + channel.fisher(theta, channel.estimate_noise(theta))

@@ -50,11 +50,13 @@ def apply_effect(
     problem = extended.problem(log)
     options: dict[str, Any] = {"from": "the candidate's least-squares fit in the diagnosis"}
     extra_information = None
-    channel = None if diagnosis.weights is None else AttitudeChannel.of(extended, log)
-    if channel is not None and diagnosis.weights is not None:
+    weights = diagnosis.weights
+    channel = None if weights is None else AttitudeChannel.of(extended, log, weights.attitude_stride)
+    if channel is not None and weights is not None:
         # fitted to the gyro and the star tracker: the bound is that of both
-        options["attitude_noise"] = diagnosis.weights.attitude.to_dict()
-        extra_information = channel.fisher(fit.theta, diagnosis.weights.attitude)
+        options["attitude_noise"] = weights.attitude.to_dict()
+        options["attitude_stride"] = weights.attitude_stride
+        extra_information = channel.fisher(fit.theta, weights.attitude)
     return extended, problem.make_estimate(
         fit.theta,
         estimator="diagnose",
@@ -137,7 +139,7 @@ def parameter_errors(
         )
     index = [model.parameters.names.index(n) for n in FUEL_PARAMETER_NAMES]
     attitude_noise = estimate.options.get("attitude_noise")
-    channel = None if attitude_noise is None else AttitudeChannel.of(model, log)
+    channel = None if attitude_noise is None else AttitudeChannel.of(model, log, int(estimate.options.get("attitude_stride", 1)))
     extra_information = None if channel is None else channel.fisher(theta_true, AttitudeNoise.from_dict(attitude_noise))
     std = model.problem(log).crlb_std(theta_true, estimate.noise_std_rad_s, extra_information)
     return ParameterErrors(FUEL_PARAMETER_NAMES, estimate.theta[index] - theta_true[index], std[index], estimate.theta_std[index])

@@ -19,7 +19,7 @@ ed. 1999, sec. 16.6; Box, Jenkins & Reinsel, *Time Series Analysis*, ch. 8 and 1
 * :func:`dominant_frequencies`: significant spectral lines of the residual;
 * :func:`failing_segments`: the time windows where the residual exceeds the noise, with what the
   arm was doing there;
-* :func:`analyse_residuals`: all of it in one :class:`ResidualAnalysis`.
+* :func:`analyse_residuals`: all of it in one :class:`ResidualAnalysis` (inputs band-limited by :func:`band_limited_inputs`).
 
 Multiple testing: every "significant" below is at ``alpha = 1 - confidence`` *family-wise*
 (Bonferroni or Holm over the lags, windows, inputs and channels that make up one question), so a
@@ -35,6 +35,7 @@ from __future__ import annotations
 
 from estimators.diagnostics.residuals.analysis import ResidualAnalysis as ResidualAnalysis
 from estimators.diagnostics.residuals.analysis import analyse_residuals as analyse_residuals
+from estimators.diagnostics.residuals.analysis import band_limited_inputs as band_limited_inputs
 from estimators.diagnostics.residuals.correlation import CrossCorrelation as CrossCorrelation
 from estimators.diagnostics.residuals.correlation import autocorrelation as autocorrelation
 from estimators.diagnostics.residuals.correlation import cross_correlation as cross_correlation
