@@ -67,6 +67,13 @@ class BaseRateProblem(Protocol):
 
     def base_rate_jacobian(self, theta: FloatArray, count: bool = True) -> FloatArray: ...
 
+    def rates(self, theta: FloatArray, count: bool = True) -> tuple[FloatArray, FloatArray]: ...
+
+    def rates_jacobian(self, theta: FloatArray, count: bool = True) -> tuple[FloatArray, FloatArray]: ...
+
+    @property
+    def measured(self) -> FloatArray: ...
+
 
 #: the smallest std (rad) either part of :class:`AttitudeNoise` may have: keeps the whitening finite on a
 #: noise-free log (the midpoint rule's own error there is ~1e-9 rad per step)
@@ -203,6 +210,12 @@ def _whitened_log_likelihood(sw2: float, snu2: float, phi: float, d: FloatArray)
     return log_det + 0.5 * chi2
 
 
+#: the error model's Nelder-Mead stops when the simplex spans less than ``xatol`` in the log-stds and the logit of
+#: ``phi`` and less than ``fatol`` in ``-log L`` (on three logs, clean orbit7 with a star tracker, a fused and an
+#: exact attitude, the maximum of ``log L`` agreed with 1e-4 and 1e-6 to 1e-6, in half the evaluations)
+NELDER_MEAD_TOLERANCES = {"xatol": 1e-3, "fatol": 1e-3}
+
+
 def fit_attitude_noise(differences: FloatArray, start: AttitudeNoise | None = None) -> AttitudeNoise:
     """Maximum-likelihood :class:`AttitudeNoise` of differenced attitude residuals (T-1, 3), rad, axis by axis.
 
@@ -223,9 +236,7 @@ def fit_attitude_noise(differences: FloatArray, start: AttitudeNoise | None = No
             starts.append(np.array([*np.log(np.maximum(near, MIN_STD_RAD)), _logit(start.walk_correlation[axis])]))
         best = None
         for x0 in starts:
-            result = minimize(
-                _negative_log_likelihood, x0, args=(d,), method="Nelder-Mead", options={"xatol": 1e-4, "fatol": 1e-6}
-            )
+            result = minimize(_negative_log_likelihood, x0, args=(d,), method="Nelder-Mead", options=NELDER_MEAD_TOLERANCES)
             if best is None or result.fun < best.fun:
                 best = result
         assert best is not None
@@ -243,15 +254,74 @@ def _logit(phi: float) -> float:
     return math.log(phi / (MAX_CORRELATION - phi))
 
 
-def block_sums(steps: FloatArray, stride: int, axis: int = 0) -> FloatArray:
-    """Sums of ``stride`` consecutive entries of ``steps`` along ``axis`` (the steps between compared samples; the
-    last incomplete block dropped); ``steps`` itself at stride 1."""
-    if stride == 1:
-        return steps
-    steps = np.moveaxis(np.asarray(steps, dtype=float), axis, 0)
-    n_blocks = len(steps) // stride
-    summed = steps[: n_blocks * stride].reshape(n_blocks, stride, *steps.shape[1:]).sum(axis=1)
-    return np.moveaxis(summed, 0, axis)
+@dataclass(frozen=True)
+class GyroCoupling:
+    """How an attitude source's residual steps follow the gyro residual's: per axis, a filter of the gyro's steps
+    over lags ``-1 .. n_lags - 2`` samples (``coefficients`` (n_lags, 3), lag -1 first), fitted by least squares
+    (:func:`estimate_gyro_coupling`). An attitude fused on board with the gyro integrates the gyro's noise between
+    star-tracker corrections and forgets it over the filter's time constant: at high frequency its steps are the gyro's
+    (a coefficient near -1 at lag 0 for this channel's sign, ``predicted - measured`` in both), at low frequency the
+    star tracker's. Subtracting the filter's response leaves what the attitude measures beyond the gyro: the
+    conditional distribution of the attitude given the gyro, the second factor of their joint likelihood."""
+
+    coefficients: FloatArray
+
+    def response(self, gyro_steps: FloatArray) -> FloatArray:
+        """The filter's output (P, n, 3) for gyro residual steps (P, n, 3), rad: ``sum_l c_l g_{k-l}``, zero before the
+        first and after the last step."""
+        out = np.zeros_like(gyro_steps)
+        n = gyro_steps.shape[1]
+        for index, c in enumerate(self.coefficients):
+            lag = index - 1
+            if lag >= 0:
+                out[:, lag:] += c * gyro_steps[:, : n - lag]
+            else:
+                out[:, : n + lag] += c * gyro_steps[:, -lag:]
+        return out
+
+    def to_dict(self) -> dict[str, list[list[float]]]:
+        return {"coefficients": np.asarray(self.coefficients, dtype=float).tolist()}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> GyroCoupling:
+        return cls(np.asarray(data["coefficients"], dtype=float))
+
+
+#: the span (s) of the lags :func:`estimate_gyro_coupling` fits: several time constants of an on-board attitude filter
+#: (0.1-0.3 s for a navigation gyro fused with a 5 arcsec star tracker at 20-100 Hz)
+COUPLING_SPAN_S = 1.0
+
+
+def estimate_gyro_coupling(differences: FloatArray, gyro_steps: FloatArray, dt_s: float) -> GyroCoupling:
+    """:class:`GyroCoupling` of attitude residual steps ``differences`` (n, 3) on gyro residual steps ``gyro_steps``
+    (n, 3), both rad, from a fit of the model (the baseline's), lags -1 .. ``COUPLING_SPAN_S / dt_s``, their sum held
+    at zero: an attitude fused with an absolute sensor (a star tracker) follows it at low frequency, not the gyro,
+    and a free sum, fitted from the noise, let a candidate that shifts the gyro residual slowly (a bias) move the
+    attitude residual through it (clean fused logs were named external_torque or gyro_bias).
+
+    Least squares per axis on the first differences of both: a missing effect's slow signature, in both channels
+    at that fit, must not be taken for the filter's response (the dependence test,
+    :func:`~estimators.diagnostics.model_fit.attitude_gyro_dependence`, differences for the same reason)."""
+    n_lags = math.ceil(COUPLING_SPAN_S / dt_s) + 2
+    a = np.diff(np.asarray(differences, dtype=float), axis=0)
+    g = np.diff(np.asarray(gyro_steps, dtype=float), axis=0)
+    n = len(a)
+    if n < 4 * n_lags:
+        raise SpaceIdInputError(f"gyro coupling: {n + 2} samples are too few for {n_lags} lags (need {4 * n_lags + 2})")
+    coefficients = np.empty((n_lags, 3))
+    for axis in range(3):
+        design = np.zeros((n, n_lags))
+        for index in range(n_lags):
+            lag = index - 1
+            if lag >= 0:
+                design[lag:, index] = g[: n - lag, axis]
+            else:
+                design[: n + lag, index] = g[-lag:, axis]
+        # sum of the coefficients zero (the last one minus the others): a constant gyro error moves a fused attitude
+        # by a bounded amount, its steps by nothing, so a slow gyro residual (a bias, a momentum) passes nothing
+        free = np.linalg.lstsq(design[:, :-1] - design[:, -1:], a[:, axis], rcond=None)[0]
+        coefficients[:, axis] = np.append(free, -free.sum())
+    return GyroCoupling(coefficients)
 
 
 def midpoint_log(log: MeasurementLog) -> MeasurementLog:
@@ -344,24 +414,17 @@ class AttitudeChannel:
         problem: the model bound to the log's midpoint samples (:func:`midpoint_log`), any object with
             ``base_rate(theta (P, k)) -> (P, T, 3)`` and ``base_rate_jacobian(theta (k,)) -> (3T, k)``.
         log: the log itself, with attitude quaternions.
-        stride: compare the rotations every ``stride`` samples (1: every sample). The prediction still integrates the
-            model's rate over every step; only the comparison is coarser: the residual's steps are summed over blocks
-            of ``stride`` steps (:func:`block_sums`), the last incomplete block dropped. An attitude fused on board
-            with this gyro follows the gyro's noise between star-tracker corrections; over blocks long against the
-            filter's time constant it is the star tracker's, an independent measurement again (:func:`diagnose`
-            chooses the stride).
+        coupling: the attitude's response to the gyro's residual (:class:`GyroCoupling`), or
+            ``None`` (an attitude source independent of this gyro). With it the channel compares the attitude given
+            the gyro: each step's residual less the coupling's filter of the gyro residual's steps at the same
+            ``theta``, so that an attitude fused on board with this gyro no longer counts the gyro's noise twice.
 
     Attributes:
         measured: ``Phi`` (T, 3), rad, the star tracker's accumulated rotation, first sample's base axes.
-        n_values: ``3B - 6``, the whitened residual's values (:meth:`residuals`), B the compared samples (T at stride 1).
+        n_values: ``3T - 6``, the whitened residual's values (:meth:`residuals`).
     """
 
-    def __init__(self, problem: BaseRateProblem, log: MeasurementLog, stride: int = 1) -> None:
-        if not isinstance(stride, int | np.integer) or stride < 1 or (log.n_samples - 1) // stride < 2:
-            raise SpaceIdInputError(
-                f"attitude channel: stride expected an integer >= 1 leaving at least 2 steps of {log.n_samples - 1}, "
-                f"got {stride!r}"
-            )
+    def __init__(self, problem: BaseRateProblem, log: MeasurementLog, coupling: GyroCoupling | None = None) -> None:
         quat = log.quat_base_to_inertial_wxyz
         if quat is None:
             raise SpaceIdInputError("attitude channel: the log has no attitude quaternions (no star tracker)")
@@ -373,24 +436,20 @@ class AttitudeChannel:
         self.measured = np.concatenate((np.zeros((1, 3)), np.cumsum(increments, axis=0)))
         #: ``(A_{j-1} + A_j) / 2 * dt_j`` (T-1, 3, 3): maps the step's midpoint rate to its rotation increment
         self._step_map = 0.5 * (relative[:-1] + relative[1:]) * np.diff(np.asarray(log.t_s, dtype=float))[:, None, None]
-        self.stride = int(stride)
-        self._measured_steps = block_sums(increments, self.stride)
+        self.coupling = coupling
+        self._dt_s = np.diff(np.asarray(log.t_s, dtype=float))
+        self._measured_steps = increments
         self._cached: tuple[AttitudeNoise, list[FloatArray], FloatArray | None] | None = None
         self._truncation: FloatArray | None = None
-        self.n_values = 3 * self.n_compared - 6
-
-    @property
-    def n_compared(self) -> int:
-        """B: the samples whose rotations are compared (every ``stride``-th, from the first)."""
-        return len(self._measured_steps) + 1
+        self.n_values = 3 * log.n_samples - 6
 
     @classmethod
-    def of(cls, model: IdentificationModel, log: MeasurementLog, stride: int = 1) -> AttitudeChannel | None:
-        """The channel of ``model`` on ``log`` at ``stride``; ``None`` when the log has no attitude or fewer than 3
-        samples."""
+    def of(cls, model: IdentificationModel, log: MeasurementLog, coupling: GyroCoupling | None = None) -> AttitudeChannel | None:
+        """The channel of ``model`` on ``log`` (given the gyro with ``coupling``); ``None`` when the log has no attitude
+        or fewer than 3 samples."""
         if log.quat_base_to_inertial_wxyz is None or log.n_samples < 3:
             return None
-        channel = cls(model.problem(_shared_midpoint_log(log)), log, stride)
+        channel = cls(model.problem(_shared_midpoint_log(log)), log, coupling)
         if log.n_samples >= MIN_SAMPLES_FOR_TRUNCATION:
             channel.set_truncation(_shared_truncation(model, log, channel))
         return channel
@@ -403,9 +462,9 @@ class AttitudeChannel:
             raise SpaceIdInputError(
                 f"attitude channel: truncation shape expected {self.measured.shape} finite, got {shape.shape}"
             )
-        self._truncation = block_sums(np.diff(shape, axis=0), self.stride)
+        self._truncation = np.diff(shape, axis=0)
         self._cached = None
-        self.n_values = 3 * self.n_compared - 6 - 3
+        self.n_values = 3 * len(self.measured) - 6 - 3
 
     def predicted(self, theta: FloatArray) -> FloatArray:
         """``Phi_hat`` (P, T, 3), rad, for ``theta`` (P, k)."""
@@ -414,23 +473,42 @@ class AttitudeChannel:
         return np.concatenate((np.zeros((len(steps), 1, 3)), np.cumsum(steps, axis=1)), axis=1)
 
     def differences(self, theta: FloatArray) -> FloatArray:
-        """``d_k = e_k - e_{k-1}`` (B-1, 3), rad, of the residual ``e = Phi_hat - Phi`` at ``theta`` (k,), between
-        compared samples."""
+        """``d_k = e_k - e_{k-1}`` (T-1, 3), rad, of the residual ``e = Phi_hat - Phi`` at ``theta`` (k,) (less the
+        coupling's response to the gyro residual, with a coupling)."""
+        if self.coupling is not None:
+            base, gyro = self.problem.rates(np.atleast_2d(theta))
+            return self._coupled(base, gyro)[0]
         omega = self.problem.base_rate(np.atleast_2d(theta))[0, 1:]
-        return block_sums(np.einsum("tij,tj->ti", self._step_map, omega), self.stride) - self._measured_steps
+        return np.einsum("tij,tj->ti", self._step_map, omega) - self._measured_steps
+
+    def gyro_steps(self, gyro: FloatArray) -> FloatArray:
+        """The gyro residual integrated over each step, (P, T-1, 3), rad, from the predicted reading ``gyro`` (P, T, 3)
+        at the midpoint samples: ``(predicted - measured) dt``, the mean of the step's two gyro samples measured."""
+        return (gyro[:, 1:] - self.problem.measured[1:]) * self._dt_s[:, None]
+
+    def _coupled(self, base: FloatArray, gyro: FloatArray) -> FloatArray:
+        """Residual steps given the gyro (P, T-1, 3) from the model's rates (P, T, 3) (see ``coupling``)."""
+        assert self.coupling is not None
+        steps = np.einsum("tij,ptj->pti", self._step_map, base[:, 1:]) - self._measured_steps
+        return steps - self.coupling.response(self.gyro_steps(gyro))
 
     def residuals(self, theta: FloatArray, noise: AttitudeNoise) -> FloatArray:
-        """The whitened differences (3B-6,) at ``theta`` (k,): unit variance and independent under ``noise``."""
+        """The whitened differences (3T-6,) at ``theta`` (k,): unit variance and independent under ``noise``."""
         return self._project(noise.whiten(self.differences(theta), self._factors(noise)), noise).ravel()
 
     def difference_jacobian(self, theta: FloatArray) -> FloatArray:
-        """``d differences / d theta`` (B-1, 3, k) at ``theta`` (k,)."""
+        """``d differences / d theta`` (T-1, 3, k) at ``theta`` (k,)."""
         n_t = len(self.measured)
+        if self.coupling is not None:
+            base, gyro = (j.reshape(n_t, 3, -1)[1:] for j in self.problem.rates_jacobian(np.asarray(theta, dtype=float)))
+            gyro_steps = gyro * self._dt_s[:, None, None]  # (T-1, 3, k)
+            response = self.coupling.response(np.moveaxis(gyro_steps, 2, 0))  # (k, T-1, 3)
+            return np.einsum("tij,tjk->tik", self._step_map, base) - np.moveaxis(response, 0, 2)
         rates = self.problem.base_rate_jacobian(np.asarray(theta, dtype=float)).reshape(n_t, 3, -1)[1:]
-        return block_sums(np.einsum("tij,tjk->tik", self._step_map, rates), self.stride)
+        return np.einsum("tij,tjk->tik", self._step_map, rates)
 
     def jacobian(self, theta: FloatArray, noise: AttitudeNoise) -> FloatArray:
-        """``d residuals / d theta`` (3B-6, k) at ``theta`` (k,)."""
+        """``d residuals / d theta`` (3T-6, k) at ``theta`` (k,)."""
         jac = self.difference_jacobian(theta)
         return self._project(noise.whiten(jac, self._factors(noise)), noise).reshape(-1, jac.shape[2])
 
@@ -441,8 +519,11 @@ class AttitudeChannel:
 
     def chi2s(self, thetas: FloatArray, noise: AttitudeNoise) -> FloatArray:
         """:meth:`chi2` of each row of ``thetas`` (P, k), the model evaluated once for all: (P,)."""
-        omega = self.problem.base_rate(np.atleast_2d(thetas))[:, 1:]
-        differences = block_sums(np.einsum("tij,ptj->pti", self._step_map, omega), self.stride, axis=1) - self._measured_steps
+        if self.coupling is not None:
+            differences = self._coupled(*self.problem.rates(np.atleast_2d(thetas)))
+        else:
+            omega = self.problem.base_rate(np.atleast_2d(thetas))[:, 1:]
+            differences = np.einsum("tij,ptj->pti", self._step_map, omega) - self._measured_steps
         factors = self._factors(noise)
         return np.array([float(np.sum(self._project(noise.whiten(d, factors), noise) ** 2)) for d in differences])
 
@@ -466,7 +547,8 @@ class AttitudeChannel:
         at ``theta`` (:meth:`estimate_noise`), differences of it between models are profile likelihood ratios: the
         error model is a nuisance refitted under each model, so a model that explains structure the error model had
         absorbed as the model's own wander gains its log-determinant, and one that explains nothing gains nothing."""
-        return self.chi2(theta, noise) + noise.log_det(self.n_compared) - reference.log_det(self.n_compared)
+        n_steps = len(self.measured)
+        return self.chi2(theta, noise) + noise.log_det(n_steps) - reference.log_det(n_steps)
 
     def _factors(self, noise: AttitudeNoise) -> list[FloatArray]:
         """The whitening factors of ``noise``, cached for the last noise model asked (with the whitened truncation)."""
@@ -477,7 +559,7 @@ class AttitudeChannel:
         return self._cached[1]
 
     def _project(self, whitened: FloatArray, noise: AttitudeNoise) -> FloatArray:
-        """``whitened`` (B-2, 3[, k]) less its projection on the whitened truncation shape, axis by axis."""
+        """``whitened`` (T-2, 3[, k]) less its projection on the whitened truncation shape, axis by axis."""
         self._factors(noise)
         assert self._cached is not None
         x = self._cached[2]

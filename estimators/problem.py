@@ -224,6 +224,37 @@ class IdentificationProblem:
             return self.jacobian(theta, count)
         return self._remembered("base_rate", np.asarray(theta, dtype=float), count, self._base_rate_jacobian)
 
+    def rates(self, theta: FloatArray, count: bool = True) -> tuple[FloatArray, FloatArray]:
+        """The base's own rate and the gyro's predicted reading, each (P, T, 3), rad/s, base body frame, for ``theta``
+        (P, k), from one evaluation of the model (:meth:`base_rate` and :meth:`predict`; equal without measurement
+        effects)."""
+        theta = np.atleast_2d(np.asarray(theta, dtype=float))
+        if self._effects is None:
+            omega = self.predict(theta, count=count)
+            return omega, omega
+        base, gyro = self._effect_rates(theta, slice(None))
+        if count:
+            self.n_model_samples += base.shape[0] * base.shape[1]
+        return base, gyro
+
+    def rates_jacobian(self, theta: FloatArray, count: bool = True) -> tuple[FloatArray, FloatArray]:
+        """``d base_rate / d theta`` and ``d predict / d theta``, each (3T, k), at ``theta`` (k,), from one batched
+        evaluation of the central differences (:meth:`base_rate_jacobian`, :meth:`jacobian`)."""
+        if self._effects is None:
+            jac = self.jacobian(theta, count)
+            return jac, jac
+        both = self._remembered("rates", np.asarray(theta, dtype=float), count, self._rates_jacobian)
+        return both[: 3 * self.n_samples], both[3 * self.n_samples :]
+
+    def _rates_jacobian(self, theta: FloatArray) -> FloatArray:
+        """:meth:`rates_jacobian` stacked (6T, k), not counted."""
+
+        def stacked(points: FloatArray, count: bool = False) -> FloatArray:
+            base, gyro = self.rates(points, count=count)
+            return np.concatenate((base, gyro), axis=1)  # (P, 2T, 3)
+
+        return self._difference_jacobian(theta, stacked)
+
     def gyro_error(self, theta: FloatArray) -> FloatArray:
         """What the measurement effects add to the base rate, ``omega_gyro - omega_base`` (T, 3), rad/s, at ``theta`` (k,).
 

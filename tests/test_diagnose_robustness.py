@@ -10,15 +10,18 @@ the old search bounds, and a pendulum slosh fitted above the liquid left.
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 import pytest
 from scipy.stats import chi2
 
 from estimators.attitude_channel import (
+    COUPLING_SPAN_S,
     AttitudeChannel,
     AttitudeNoise,
     _negative_log_likelihood,
+    estimate_gyro_coupling,
     fit_attitude_noise,
     truncation_shape,
 )
@@ -76,25 +79,26 @@ def test_an_attitude_fused_with_the_gyro_is_not_taken_for_a_second_measurement(a
     """A clean 20 Hz log of paper6 whose attitude is an on-board estimate fused with the same gyro: its steps are the
     gyro's noise integrated, so both channels counted the gyro's noise twice and named gyro_scale or slosh (likelihood
     ratios 50 and 28). The dependence is detected (and only there: not for a star tracker or an exact attitude); the
-    attitude is then compared at a coarser stride, where it is the star tracker's again, or not at all: none."""
+    attitude is then compared given the gyro (its response to the gyro's residual taken out): none."""
     env = simulate_variation(draw_variation("none", 505, {"attitude": attitude}), 60.0)
     d = diagnose(IdentificationModel(env.robot, "fuel"), env.measurement_log())
     assert d.verdict == NO_MISSING_EFFECT, d.reason
     assert ("fused with this gyro" in d.reason) is dependent
-    stride = 1 if d.weights is None else d.weights.attitude_stride
-    assert (d.attitude_rejected or stride > 1) is dependent
+    assert d.weights is not None and not d.attitude_rejected
+    assert (d.weights.coupling is not None) is dependent
 
 
-def test_a_fused_attitude_at_a_coarser_stride_tells_a_gyro_bias_from_a_momentum() -> None:
-    """A gyro bias on the 820 kg orbit7 at 100 Hz with a fused attitude (held-out matrix log, seed 8011): on the gyro
-    alone a bias and a constant momentum fit within 2 chi-square units of each other (a heavy base barely changes
-    the rate a momentum gives), and the verdict was initial_momentum. The fused attitude, compared every 128 samples,
-    is the star tracker's again: it sees no rotation, so the bias is named."""
-    env = simulate_variation(draw_variation("gyro_bias", 8011), 60.0)
+@pytest.mark.parametrize(("effect", "seed", "fixed"), [("gyro_bias", 8011, {}), ("gyro_bias", 9004, {"attitude": "fused"})])
+def test_a_fused_attitude_given_the_gyro_tells_a_gyro_bias_from_a_momentum(effect: str, seed: int, fixed: dict) -> None:
+    """Gyro biases with a fused attitude (held-out matrix logs: orbit7 at 100 Hz; paper6 at 20 Hz): on the gyro alone a
+    bias and a constant momentum fit within 2 chi-square units of each other (a heavy base barely changes the rate a
+    momentum gives), and the verdict was initial_momentum. The fused attitude given the gyro is the star tracker's
+    evidence inside the fusion: it sees no rotation, so the bias is named."""
+    env = simulate_variation(draw_variation(effect, seed, fixed), 60.0)
     assert env.sensors.attitude_source == "fused"
     d = diagnose(IdentificationModel(env.robot, "fuel"), env.measurement_log())
-    assert d.verdict == "gyro_bias", d.reason
-    assert d.weights is not None and d.weights.attitude_stride > 1 and not d.attitude_rejected
+    assert d.verdict == effect, d.reason
+    assert d.weights is not None and d.weights.coupling is not None and not d.attitude_rejected
 
 
 @pytest.mark.parametrize(("attitude", "dependent"), [("fused", True), ("star_tracker_1arcsec", False), ("exact", False)])
@@ -245,3 +249,58 @@ def test_attitude_noise_round_trip_and_bad_values() -> None:
     with pytest.raises(Exception, match="white_std_rad"):
         AttitudeNoise((-1e-6, 0.0, 0.0), (0.0,) * 3)
     assert chi2.sf(0.0, 3) == 1.0  # the low-frequency test's tail on an empty excess
+
+
+@pytest.mark.parametrize("gain", [0.05, 0.2])
+def test_the_gyro_coupling_of_a_complementary_filter_is_recovered(gain: float) -> None:
+    """A fixed-gain complementary filter, e_k = (1 - K)(e_{k-1} + g_k) + K n_k (the attitude error from gyro steps g and
+    star-tracker noise n): the residual's steps follow the gyro's through a filter whose response the estimate
+    recovers (independent reference: the filter's impulse response in closed form, (1-K)^(l+1) - (1-K)^l for l >= 1 and
+    1 - K at lag 0), with the sum of the coefficients held at zero; taking it out leaves steps uncorrelated with the
+    gyro's."""
+    rng = np.random.default_rng(21)
+    n, dt = 6000, 0.01
+    g = rng.normal(0.0, 1e-6, (n, 3))
+    star = rng.normal(0.0, 2e-6, (n, 3))
+    e = np.zeros((n, 3))
+    for k in range(1, n):
+        e[k] = (1.0 - gain) * (e[k - 1] + g[k]) + gain * star[k]
+    steps = np.diff(e, axis=0, prepend=0.0)
+    coupling = estimate_gyro_coupling(steps, g, dt)
+    c = coupling.coefficients
+    assert c.shape == (math.ceil(COUPLING_SPAN_S / dt) + 2, 3)
+    np.testing.assert_allclose(c.sum(axis=0), 0.0, atol=1e-12)
+    expected = np.array([1.0 - gain] + [(1.0 - gain) ** (lag + 1) - (1.0 - gain) ** lag for lag in range(1, 8)])
+    np.testing.assert_allclose(c[1:9].mean(axis=1), expected, atol=0.02)
+    assert np.max(np.abs(c[0])) < 0.02  # nothing before the gyro's step
+    direct = np.stack([np.convolve(g[:, i], c[1:, i])[:n] for i in range(3)], axis=1)
+    direct[:-1] += c[0] * g[1:]
+    np.testing.assert_allclose(coupling.response(g[None])[0], direct, atol=1e-18)
+    left = steps - coupling.response(g[None])[0]
+    rho = [np.corrcoef(left[:, i], g[:, i])[0, 1] for i in range(3)]
+    assert np.max(np.abs(rho)) < 0.05
+
+
+def test_the_coupled_channel_jacobian_matches_finite_differences() -> None:
+    """The attitude channel given the gyro: its Jacobian (base rate and gyro reading through the coupling) against
+    central differences of its own residual steps, on a fused log with a gyro bias in the model."""
+    env = simulate_variation(draw_variation("gyro_bias", 9004, {"attitude": "fused"}), 10.0)
+    log, truth = env.measurement_log(), truth_of(env)
+    model = IdentificationModel(env.robot, "fuel", effects=("gyro_bias",))
+    theta = true_parameters(model, truth)
+    assert theta is not None
+    plain = AttitudeChannel.of(model, log)
+    assert plain is not None
+    gyro_steps = plain.gyro_steps(plain.problem.rates(theta[None])[1])[0]
+    channel = AttitudeChannel.of(model, log, estimate_gyro_coupling(plain.differences(theta), gyro_steps, 0.05))
+    assert channel is not None
+    jac = channel.difference_jacobian(theta)
+    for k in range(len(theta)):
+        h = 1e-6 * model.parameters.width[k]
+        up, down = theta.copy(), theta.copy()
+        up[k] += h
+        down[k] -= h
+        numeric = (channel.differences(up) - channel.differences(down)) / (2.0 * h)
+        np.testing.assert_allclose(jac[:, :, k], numeric, rtol=1e-5, atol=1e-9 * np.abs(jac[:, :, k]).max() + 1e-20)
+    noise = channel.estimate_noise(theta)
+    assert channel.chi2s(np.stack([theta, theta]), noise) == pytest.approx([channel.chi2(theta, noise)] * 2, rel=1e-12)

@@ -219,9 +219,8 @@ def diagnose(
     independence = independent_attitude_channel(model, log, baseline.theta, alpha)
     channel = independence.channel
     diagnosis = _diagnose(model, log, names, baseline, alpha, channel)
-    if independence.stride > 1:
+    if independence.coupled is not None:
         diagnosis.reason = f"{independence.describe()}; {diagnosis.reason}"
-        diagnosis.attitude_rejected = channel is None
     if channel is not None and not diagnosis.attitude_consistent:
         p_best = max(f.attitude_white_p for f in [diagnosis.baseline, *diagnosis.candidates])
         diagnosis = _diagnose(model, log, names, baseline, alpha, None)
@@ -247,14 +246,14 @@ def _diagnose(
     weights = None
     if channel is not None:
         # both channels from here on; the star tracker's noise from the data, the baseline refitted to both
-        weights = ChannelWeights(sigma0, channel.estimate_noise(baseline.theta), channel.stride)
+        weights = ChannelWeights(sigma0, channel.estimate_noise(baseline.theta), channel.coupling)
         # the baseline refitted on both channels with its error model, twice: the second pass is what every candidate
         # gets from the baseline's state (a fit under its error model, the error model refitted, the fit refined), so
         # that no candidate gains from one more round of the alternation than the baseline had
         for _ in range(2):
             baseline = fit_model(model, log, starts=[baseline.theta], weights=weights, channel=channel, profile_noise=True)[0]
             assert baseline.attitude_noise is not None
-            weights = ChannelWeights(sigma0, baseline.attitude_noise, channel.stride)
+            weights = ChannelWeights(sigma0, baseline.attitude_noise, channel.coupling)
         # the baseline's own error model weights every candidate's fit and is the reference of the log-determinants
         baseline.attitude_chi2 = channel.chi2(baseline.theta, weights.attitude)
     fits, variants_tried = [], 0
@@ -303,7 +302,7 @@ def _fit_candidate(
     grid = [np.concatenate((baseline.theta, s)) for s in term.grid(baseline.theta[:k_base])]
     n0 = len(baseline.theta)  # the model's own unknowns (base and effects already in it), then the candidate's
     grid += [np.concatenate((v.theta[:n0], s)) for v in other_variants for s in term.grid_from_variant(v.theta[n0:])]
-    extended_channel = None if channel is None else AttitudeChannel.of(extended, log, channel.stride)
+    extended_channel = None if channel is None else AttitudeChannel.of(extended, log, channel.coupling)
     starts = best_of_grid(problem, grid, extended_channel, weights)
     starts.append(np.concatenate((restart, term.starts(restart[:k_base])[0])))
     starts.append(np.concatenate((baseline.theta, term.nominal)))  # the baseline itself: the nested model's fit

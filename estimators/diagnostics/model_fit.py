@@ -8,14 +8,14 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares
 from scipy.stats import chi2, norm
 
-from estimators.attitude_channel import AttitudeChannel, AttitudeNoise, block_sums
+from estimators.attitude_channel import AttitudeChannel, AttitudeNoise, GyroCoupling, estimate_gyro_coupling
 from estimators.base import Estimator
 from estimators.estimate import Estimate
 from estimators.least_squares import LevenbergMarquardt
@@ -76,10 +76,11 @@ class ChannelWeights:
 
     gyro_std_rad_s: float
     attitude: AttitudeNoise
-    attitude_stride: int = 1  # the attitude channel's stride (:class:`~estimators.attitude_channel.AttitudeChannel`)
+    coupling: GyroCoupling | None = None  # the attitude's response to the gyro (a fused attitude), or None
 
     def to_dict(self) -> dict[str, Any]:
-        return {"gyro_std_rad_s": self.gyro_std_rad_s, **self.attitude.to_dict(), "attitude_stride": self.attitude_stride}
+        coupling = None if self.coupling is None else self.coupling.to_dict()
+        return {"gyro_std_rad_s": self.gyro_std_rad_s, **self.attitude.to_dict(), "attitude_coupling": coupling}
 
 
 @dataclass
@@ -191,7 +192,7 @@ def fit_model(
     if weights is None:
         channel = None
     elif channel is None:
-        channel = AttitudeChannel.of(model, log, weights.attitude_stride)
+        channel = AttitudeChannel.of(model, log, weights.coupling)
     estimate = None
     if estimator is not None:
         estimate = estimator.fit_problem(problem)
@@ -209,7 +210,7 @@ def fit_model(
             scores = [_joint_chi2(problem, channel, weights, x) for x in tried]
             theta = _joint_fit(problem, channel, weights, tried[int(np.argmin(scores))])
             if profile_noise:
-                own = ChannelWeights(weights.gyro_std_rad_s, channel.estimate_noise(theta, weights.attitude))
+                own = replace(weights, attitude=channel.estimate_noise(theta, weights.attitude))
                 theta = _joint_fit(problem, channel, own, theta)
         else:
             scores = [float(r @ r) for r in (problem.residuals(x, count=False) for x in results)]
@@ -333,21 +334,18 @@ def _scored(
     )
 
 
-def attitude_gyro_dependence(
-    differences: FloatArray, gyro_residual: FloatArray, dt_s: FloatArray, stride: int = 1
-) -> tuple[float, float]:
+def attitude_gyro_dependence(differences: FloatArray, gyro_residual: FloatArray, dt_s: FloatArray) -> tuple[float, float]:
     """Whether the attitude residual's steps carry the gyro's own noise: ``(rho, p)``, the correlation of their
     high-frequency parts and its two-sided p-value against independence.
 
-    ``differences`` (B-1, 3), rad: the attitude residual's steps between compared samples
-    (:meth:`AttitudeChannel.differences` of a channel at ``stride``); ``gyro_residual`` (T, 3), rad/s; ``dt_s``
-    (T-1,). The gyro's residual is taken to the same steps (mean of each sample step's two samples times its
-    length, summed over the ``stride`` sample steps of a compared step), then both are differenced once more: that removes what a missing effect puts in both
+    ``differences`` (T-1, 3), rad: the attitude residual's steps (:meth:`AttitudeChannel.differences`); ``gyro_residual``
+    (T, 3), rad/s; ``dt_s`` (T-1,). The gyro's residual is taken to the same steps (mean of the step's two samples
+    times its length), then both are differenced once more: that removes what a missing effect puts in both
     channels (slow), and leaves the noise. An independent attitude source (a star tracker, an exact attitude) gives
     ``rho`` near 0 (``sqrt(n) rho`` standard normal); an on-board estimate fused with this gyro follows the gyro
     between star-tracker updates, and its steps are the gyro's noise times the step: ``|rho|`` near 1.
     """
-    gyro_steps = block_sums(0.5 * (gyro_residual[1:] + gyro_residual[:-1]) * dt_s[:, None], stride)
+    gyro_steps = 0.5 * (gyro_residual[1:] + gyro_residual[:-1]) * dt_s[:, None]
     a = np.diff(differences, axis=0).ravel()
     b = np.diff(gyro_steps, axis=0).ravel()
     denominator = math.sqrt(float(a @ a) * float(b @ b))
@@ -357,64 +355,52 @@ def attitude_gyro_dependence(
     return rho, float(2.0 * norm.sf(abs(rho) * math.sqrt(a.size)))
 
 
-#: the fewest compared samples an attitude channel keeps when :func:`independent_attitude_channel` coarsens it
-MIN_COMPARED_SAMPLES = 30
-
-
 @dataclass(frozen=True)
 class AttitudeIndependence:
-    """What :func:`independent_attitude_channel` found: the channel to use (``None``: the gyro alone), its stride, and
-    the dependence ``(rho, p)`` at every sample (stride 1) and at the stride chosen."""
+    """What :func:`independent_attitude_channel` found: the channel to use (``None``: the log has no attitude) and the
+    dependence ``(rho, p)`` of the attitude's steps on the gyro's before (``raw``) and after (``coupled``) the
+    coupling was taken out (``coupled`` is ``None`` when the attitude was independent as it came)."""
 
     channel: AttitudeChannel | None
-    stride: int
-    at_every_sample: tuple[float, float]
-    at_stride: tuple[float, float]
+    raw: tuple[float, float]
+    coupled: tuple[float, float] | None = None
 
     def describe(self) -> str:
-        """A sentence for the diagnosis's reason ("" when the attitude was independent at every sample)."""
-        rho, p = self.at_every_sample
-        head = (
-            f"the attitude's steps follow the gyro's own noise (correlation {rho:+.2f} of their high-frequency parts, "
-            f"p = {p:.2g}): an attitude estimate fused with this gyro"
-        )
-        if self.stride == 1:
+        """A sentence for the diagnosis's reason ("" when the attitude was independent of the gyro)."""
+        if self.coupled is None:
             return ""
-        if self.channel is None:
-            return f"{head}, at every stride up to {self.stride} samples, so the verdict rests on the gyro alone"
         return (
-            f"{head}; compared every {self.stride} samples it is independent of it (correlation {self.at_stride[0]:+.2f},"
-            f" p = {self.at_stride[1]:.2g}), so the attitude is used at that stride"
+            f"the attitude's steps follow the gyro's own noise (correlation {self.raw[0]:+.2f} of their high-frequency "
+            f"parts, p = {self.raw[1]:.2g}): an attitude estimate fused with this gyro, so the attitude is compared given "
+            f"the gyro (its response to the gyro's residual taken out; correlation left {self.coupled[0]:+.2f})"
         )
 
 
 def independent_attitude_channel(
     model: IdentificationModel, log: MeasurementLog, theta: FloatArray, alpha: float
 ) -> AttitudeIndependence:
-    """The attitude channel of ``model`` on ``log`` at the finest stride (1, 2, 4, ...) whose residual steps at
-    ``theta`` (k,) do not follow the gyro's noise (:func:`attitude_gyro_dependence` p-value >= ``alpha``), keeping at
-    least :data:`MIN_COMPARED_SAMPLES` compared samples; channel ``None`` when none is independent (or the log has no
-    attitude).
+    """The attitude channel of ``model`` on ``log`` that measures what the gyro does not: as it comes when its residual
+    steps at ``theta`` (k,) do not follow the gyro's noise (:func:`attitude_gyro_dependence` p-value >= ``alpha``),
+    else given the gyro, with the :class:`~estimators.attitude_channel.GyroCoupling` fitted at ``theta``
+    (:func:`~estimators.attitude_channel.estimate_gyro_coupling`).
 
-    An attitude fused on board with this gyro follows the gyro between star-tracker corrections, so its steps
-    sample to sample carry the gyro's noise (not a second measurement); compared over blocks long against the
-    filter's time constant it is the star tracker's again (a 5 arcsec star tracker fused with a navigation gyro at
-    100 Hz: a time constant of about 0.1 s). A stride loses the attitude's information only above its rate."""
+    An attitude fused on board with this gyro follows the gyro between star-tracker corrections, so its steps carry
+    the gyro's noise; counting them as a second measurement counted that noise twice (clean logs named gyro_scale or
+    slosh), and dropping them lost what the star tracker inside the fusion measures (a gyro bias on a heavy base was
+    named initial_momentum: on the gyro alone the two fit within 2 chi-square units)."""
+    channel = AttitudeChannel.of(model, log)
+    if channel is None:
+        return AttitudeIndependence(None, (0.0, 1.0))
     gyro_residual = model.problem(log).residuals(theta, count=False).reshape(-1, 3)
     dt_s = np.diff(log.t_s)
-    stride, first, dependence = 1, (0.0, 1.0), (0.0, 1.0)
-    while True:
-        channel = AttitudeChannel.of(model, log, stride)
-        if channel is None:
-            return AttitudeIndependence(None, stride, first, dependence)
-        dependence = attitude_gyro_dependence(channel.differences(theta), gyro_residual, dt_s, stride)
-        if stride == 1:
-            first = dependence
-        if dependence[1] >= alpha:
-            return AttitudeIndependence(channel, stride, first, dependence)
-        if (log.n_samples - 1) // (2 * stride) + 1 < MIN_COMPARED_SAMPLES:
-            return AttitudeIndependence(None, stride, first, dependence)
-        stride *= 2
+    raw = attitude_gyro_dependence(channel.differences(theta), gyro_residual, dt_s)
+    if raw[1] >= alpha:
+        return AttitudeIndependence(channel, raw)
+    gyro_steps = channel.gyro_steps(channel.problem.rates(np.atleast_2d(theta), count=False)[1])[0]
+    coupling = estimate_gyro_coupling(channel.differences(theta), gyro_steps, float(np.median(dt_s)))
+    coupled = AttitudeChannel.of(model, log, coupling)
+    assert coupled is not None
+    return AttitudeIndependence(coupled, raw, attitude_gyro_dependence(coupled.differences(theta), gyro_residual, dt_s))
 
 
 #: how many of a term's grid candidates (:meth:`~estimators.models.effect_models.EffectTerm.grid`) start local fits

@@ -46,9 +46,8 @@ def non_centrality(
 ) -> float:
     """``lambda`` of ``effect``'s likelihood ratio against ``model_without_effect`` on ``log``, at ``truth``
     (truth.json's keys: the fuel state, ``hidden_effects`` and ``noise["gyro_std_rad_s"]``); see the module docstring.
-    The attitude channel counts as ``diagnose`` uses it: at the finest stride where its steps do not follow the
-    gyro's noise (:func:`~estimators.diagnostics.model_fit.independent_attitude_channel` at the truth, at level
-    ``alpha``), or not at all.
+    The attitude channel counts as ``diagnose`` uses it: given the gyro where its steps follow the gyro's noise
+    (:func:`~estimators.diagnostics.model_fit.independent_attitude_channel` at the truth, at level ``alpha``).
 
     Raises:
         SpaceIdInputError: the truth lacks the model's unknowns or the gyro's noise, or the model already has ``effect``.
@@ -70,8 +69,7 @@ def non_centrality(
         index = term.names.index(name)
         effect_off[index] = theta[k + index]
     fisher = problem.fisher(theta, float(gyro_std))
-    # as diagnose: an attitude that follows this gyro's noise (a fused estimate) is compared at a coarser stride, or
-    # not at all
+    # as diagnose: an attitude that follows this gyro's noise (a fused estimate) is compared given the gyro
     channel = independent_attitude_channel(model, log, theta, alpha).channel
     if channel is not None:
         # the attitude residual's error model at the truth: the source's noise and the model's own wander

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from estimators.attitude_channel import AttitudeChannel, AttitudeNoise
+from estimators.attitude_channel import AttitudeChannel, AttitudeNoise, GyroCoupling
 from estimators.base import Estimator
 from estimators.diagnostics.compare import Comparison, compare
 from estimators.diagnostics.diagnose import Diagnosis, candidate_model, diagnose
@@ -51,11 +51,12 @@ def apply_effect(
     options: dict[str, Any] = {"from": "the candidate's least-squares fit in the diagnosis"}
     extra_information = None
     weights = diagnosis.weights
-    channel = None if weights is None else AttitudeChannel.of(extended, log, weights.attitude_stride)
+    channel = None if weights is None else AttitudeChannel.of(extended, log, weights.coupling)
     if channel is not None and weights is not None:
         # fitted to the gyro and the star tracker: the bound is that of both
         options["attitude_noise"] = weights.attitude.to_dict()
-        options["attitude_stride"] = weights.attitude_stride
+        if weights.coupling is not None:
+            options["attitude_coupling"] = weights.coupling.to_dict()
         extra_information = channel.fisher(fit.theta, weights.attitude)
     return extended, problem.make_estimate(
         fit.theta,
@@ -139,7 +140,12 @@ def parameter_errors(
         )
     index = [model.parameters.names.index(n) for n in FUEL_PARAMETER_NAMES]
     attitude_noise = estimate.options.get("attitude_noise")
-    channel = None if attitude_noise is None else AttitudeChannel.of(model, log, int(estimate.options.get("attitude_stride", 1)))
+    coupling = estimate.options.get("attitude_coupling")
+    channel = (
+        None
+        if attitude_noise is None
+        else AttitudeChannel.of(model, log, None if coupling is None else GyroCoupling.from_dict(coupling))
+    )
     extra_information = None if channel is None else channel.fisher(theta_true, AttitudeNoise.from_dict(attitude_noise))
     std = model.problem(log).crlb_std(theta_true, estimate.noise_std_rad_s, extra_information)
     return ParameterErrors(FUEL_PARAMETER_NAMES, estimate.theta[index] - theta_true[index], std[index], estimate.theta_std[index])
