@@ -267,7 +267,9 @@ def _diagnose(
         variants_tried += len(variants) - 1
         fits.append(min(variants, key=lambda f: _chi2(f, sigma0 * sigma0) + f.n_params * math.log(n_values)))
     gyro_residual = model.problem(log).residuals(baseline.theta, count=False).reshape(-1, 3)
-    sigma = _score(baseline, fits, alpha, difference_noise_std(gyro_residual), extra_tests=variants_tried)
+    white_std = difference_noise_std(gyro_residual)
+    _restart_the_closest(model, log, fits, white_std, weights, channel)
+    sigma = _score(baseline, fits, alpha, white_std, extra_tests=variants_tried)
     combined = _fit_challengers(model, log, baseline, fits, alpha, weights, sigma)
     for fit in fits:
         if fit.nameable:
@@ -277,6 +279,46 @@ def _diagnose(
     verdict, reason = _verdict(baseline, fits, analysis, alpha, combined)
     fits.sort(key=lambda f: (f.effect != verdict, f.bic))
     return Diagnosis(verdict, baseline, fits, analysis, sigma, alpha, reason, weights, combined=combined)
+
+
+#: the closest candidate's gyro residual RMS, over the residual's white noise, above which its fit is taken to have
+#: stopped in a local minimum and is restarted from global searches (:func:`_restart_the_closest`)
+RESTART_RMS_RATIO = 1.5
+
+#: seeds of the ``hybrid`` global searches of :func:`_restart_the_closest` (the baseline's is 0)
+RESTART_SEEDS = (1, 2, 3)
+
+
+def _restart_the_closest(
+    model: IdentificationModel,
+    log: MeasurementLog,
+    fits: list[ModelFit],
+    white_std: float,
+    weights: ChannelWeights | None,
+    channel: AttitudeChannel | None,
+) -> None:
+    """Refit the candidate of smallest gyro residual from global searches when its residual stays far above the noise
+    (RMS over ``white_std``, rad/s, above :data:`RESTART_RMS_RATIO`), and keep the better fit (in place in ``fits``).
+
+    The candidates' fits are local, from the baseline and the term's own starts. When the missing effect is strong, the
+    baseline is far off and a local fit can stop in another basin of the model's own unknowns: a 0.27 N m s momentum
+    on quick3 (held-out seed 8006) was fitted with the fuel's first moment mirrored (6.6 kg at the tank box's corner
+    against 22 kg), its residual 5.5 times the noise, 30 times the truth's cost; three of four ``hybrid`` seeds on
+    the model with the momentum found the truth's basin."""
+    closest = min(range(len(fits)), key=lambda i: fits[i].rss / (fits[i].n_residuals - fits[i].n_params))
+    fit = fits[closest]
+    if math.sqrt(fit.rss / (fit.n_residuals - fit.n_params)) <= RESTART_RMS_RATIO * white_std:
+        return
+    extended = candidate_model(model, fit.spec)
+    problem = extended.problem(log)
+    starts = [fit.theta] + [make_estimator("hybrid", seed=seed).fit_problem(problem).theta for seed in RESTART_SEEDS]
+    ext_channel = None if channel is None else AttitudeChannel.of(extended, log, channel.coupling)
+    refit = fit_model(
+        extended, log, starts=starts, effect=fit.effect, weights=weights, channel=ext_channel, problem=problem, profile_noise=True
+    )[0]
+    refit.wall_time_s += fit.wall_time_s
+    if _chi2(refit, white_std * white_std) < _chi2(fit, white_std * white_std):
+        fits[closest] = refit
 
 
 def _fit_candidate(
