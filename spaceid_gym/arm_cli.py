@@ -10,6 +10,9 @@ import time
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
+from estimators.arm.controller_model import controller_model_leave_one_out, load_controller_rows
 from estimators.arm.diagnose import diagnose_arm, where_it_fails
 from estimators.arm.identification import (
     Preparation,
@@ -150,6 +153,11 @@ def add_arm_cross_validate_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--compare-without-friction", action="store_true", help="also fit the model without friction (the error friction removes)"
     )
+    parser.add_argument(
+        "--compare-ur-model",
+        action="store_true",
+        help="also refit UR's own model on the same folds (real logs: per joint current ~ gain x m_target + friction)",
+    )
     add_executor_arguments(parser)
 
 
@@ -265,6 +273,11 @@ def run_arm_cross_validate(args: argparse.Namespace) -> None:
         models["without friction"] = _model(args, ())
     start = time.perf_counter()
     rows = leave_one_out(models, logs, estimators, preparation, floors, executor)
+    implied_gains = None
+    if getattr(args, "compare_ur_model", False):
+        controller_rows, coefficients = controller_model_leave_one_out(load_controller_rows(args.data, logs, preparation), floors)
+        rows += controller_rows
+        implied_gains = {name: (1.0 / c[:, 0]).tolist() for name, c in coefficients.items()}
     joint_names = [f"joint {j + 1}" for j in range(next(iter(models.values())).n_joints)]
     args.out.mkdir(parents=True, exist_ok=True)
     summary = summary_table(rows)
@@ -278,6 +291,7 @@ def run_arm_cross_validate(args: argparse.Namespace) -> None:
             "rows": [r.to_dict() for r in rows],
             "wall_time_s": time.perf_counter() - start,
             "executor": executor.describe(),
+            "ur_model_torque_constants_Nm_A": implied_gains,
         },
     )
     print(
@@ -291,6 +305,12 @@ def run_arm_cross_validate(args: argparse.Namespace) -> None:
             f"  {entry['model']:<28} {entry['estimator']:<60} {cells} | {entry['mean_overall_percent']:6.1f} %"
             f" | consistent: {entry['all_consistent']} | {entry['mean_wall_time_s']:.2f} s/fit"
             + ("" if excess is None else f" | cost over sdp: {100.0 * excess:+.4f} % (largest)")
+        )
+    if implied_gains:
+        mean = np.mean(list(implied_gains.values()), axis=0)
+        print(
+            "torque constants UR's refitted model implies (1 / gain, N m/A, mean over folds): "
+            + " ".join(f"{v:.2f}" for v in mean)
         )
     print(f"wrote {args.out}/table.md, rows.json")
 

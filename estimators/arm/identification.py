@@ -220,8 +220,12 @@ def prediction_error(
     model: ArmIdentificationModel, beta: FloatArray, rows: IdentificationRows, noise_floor: FloatArray | None = None
 ) -> PredictionError:
     """The figures of base parameters ``beta`` (r,) on one movement's rows (module docstring)."""
-    log = rows.log
-    residual = log.effort - model.predict(beta, rows)
+    return error_of_prediction(rows.log, model.predict(beta, rows), noise_floor)
+
+
+def error_of_prediction(log: ArmLog, predicted: FloatArray, noise_floor: FloatArray | None = None) -> PredictionError:
+    """The figures (module docstring) of any prediction (T, n) of a prepared log's effort, whatever model made it."""
+    residual = log.effort - predicted
     relative = 100.0 * np.linalg.norm(residual, axis=0) / np.maximum(np.linalg.norm(log.effort, axis=0), 1e-300)
     overall = 100.0 * float(np.linalg.norm(residual) / max(np.linalg.norm(log.effort), 1e-300))
     rms = np.sqrt(np.mean(residual**2, axis=0))
