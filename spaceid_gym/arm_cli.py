@@ -12,7 +12,12 @@ from typing import Any
 
 import numpy as np
 
-from estimators.arm.controller_model import controller_model_leave_one_out, load_controller_rows
+from estimators.arm.controller_model import (
+    CONTROLLER_FRICTION,
+    controller_estimator_label,
+    controller_model_leave_one_out,
+    load_controller_rows,
+)
 from estimators.arm.diagnose import diagnose_arm, where_it_fails
 from estimators.arm.identification import (
     Preparation,
@@ -158,6 +163,11 @@ def add_arm_cross_validate_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="also refit UR's own model on the same folds (real logs: per joint current ~ gain x m_target + friction)",
     )
+    parser.add_argument(
+        "--ur-model-friction",
+        default=",".join(CONTROLLER_FRICTION),
+        help=f"friction terms of UR's refitted model (default {','.join(CONTROLLER_FRICTION)})",
+    )
     add_executor_arguments(parser)
 
 
@@ -275,7 +285,9 @@ def run_arm_cross_validate(args: argparse.Namespace) -> None:
     rows = leave_one_out(models, logs, estimators, preparation, floors, executor)
     implied_gains = None
     if getattr(args, "compare_ur_model", False):
-        controller_rows, coefficients = controller_model_leave_one_out(load_controller_rows(args.data, logs, preparation), floors)
+        terms = parse_friction(args.ur_model_friction)
+        controller = load_controller_rows(args.data, logs, preparation, terms)
+        controller_rows, coefficients = controller_model_leave_one_out(controller, floors, controller_estimator_label(terms))
         rows += controller_rows
         implied_gains = {name: (1.0 / c[:, 0]).tolist() for name, c in coefficients.items()}
     joint_names = [f"joint {j + 1}" for j in range(next(iter(models.values())).n_joints)]

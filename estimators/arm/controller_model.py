@@ -7,7 +7,7 @@ friction per joint. Per joint ``j`` (current ``i_j`` in A, rate ``dq_j`` in rad/
     i_j  ~  a_j m_target_j  +  friction_j(dq_j)          a_j in A / (N m)
 
 with the friction terms of :class:`~spaceid_gym.arm.friction.FrictionModel` (default Coulomb, viscous and a constant
-offset, :data:`CONTROLLER_FRICTION`), every coefficient fitted by least squares on the training movements, each joint
+offset, :data:`CONTROLLER_FRICTION`; ``arm cross-validate --ur-model-friction`` chooses others), every coefficient fitted by least squares on the training movements, each joint
 on its own (so no weighting between joints enters). ``1 / a_j`` is the torque constant UR's model implies (N m/A).
 
 Signals: exactly the chain of the identification (:class:`~estimators.arm.identification.Preparation`): the current
@@ -48,7 +48,6 @@ from spaceid_gym.errors import SpaceIdInputError
 CONTROLLER_FRICTION: tuple[str, ...] = ("coulomb", "viscous", "offset")
 #: the labels of its rows in the cross-validation table
 CONTROLLER_MODEL_LABEL = "UR's model refitted"
-CONTROLLER_ESTIMATOR_LABEL = "per-joint least squares (gain + coulomb, viscous, offset)"
 
 
 @dataclass(frozen=True, eq=False)
@@ -109,11 +108,19 @@ def predict_controller_model(coefficients: FloatArray, rows: ControllerModelRows
     return np.einsum("tjk,jk->tj", rows.features, coefficients)
 
 
+def controller_estimator_label(friction: FrictionModel | Sequence[str] = CONTROLLER_FRICTION) -> str:
+    """The estimator column of the refitted controller model's rows, naming its friction terms."""
+    return f"per-joint least squares (gain + {', '.join(FrictionModel.coerce(friction).terms) or 'no friction'})"
+
+
 def load_controller_rows(
-    data: str | Path, current_logs: Mapping[str, ArmLog], preparation: Preparation
+    data: str | Path,
+    current_logs: Mapping[str, ArmLog],
+    preparation: Preparation,
+    friction: FrictionModel | Sequence[str] = CONTROLLER_FRICTION,
 ) -> dict[str, ControllerModelRows]:
     """Every movement's rows from the real UR5 movement folders in ``data`` (their ``m_target.csv``) and the already
-    loaded current logs."""
+    loaded current logs, with the ``friction`` terms."""
     try:
         torques = load_movements(data, list(current_logs), effort="m_target")
     except SpaceIdInputError as exc:
@@ -122,11 +129,13 @@ def load_controller_rows(
         raise SpaceIdInputError(
             f"--compare-ur-model: {data} holds simulated datasets; UR's model exists only in real UR5 logs (m_target.csv)"
         )
-    return {name: controller_rows(preparation, current_logs[name], torques[name]) for name in current_logs}
+    return {name: controller_rows(preparation, current_logs[name], torques[name], friction) for name in current_logs}
 
 
 def controller_model_leave_one_out(
-    rows: Mapping[str, ControllerModelRows], noise_floors: Mapping[str, FloatArray | None] | None = None
+    rows: Mapping[str, ControllerModelRows],
+    noise_floors: Mapping[str, FloatArray | None] | None = None,
+    label: str = controller_estimator_label(),
 ) -> tuple[list[CrossValidationRow], dict[str, FloatArray]]:
     """Leave one movement out with the refitted controller model: per held-out movement its
     :class:`~estimators.arm.identification.CrossValidationRow` (the table's figures) and the coefficients fitted on the
@@ -140,6 +149,6 @@ def controller_model_leave_one_out(
         fitted = fit_controller_model([r for name, r in rows.items() if name != held])
         wall = time.perf_counter() - start
         error: PredictionError = error_of_prediction(item.log, predict_controller_model(fitted, item), floors.get(held))
-        out.append(CrossValidationRow(CONTROLLER_MODEL_LABEL, CONTROLLER_ESTIMATOR_LABEL, error, None, wall, 0.0))
+        out.append(CrossValidationRow(CONTROLLER_MODEL_LABEL, label, error, None, wall, 0.0))
         coefficients[held] = fitted
     return out, coefficients

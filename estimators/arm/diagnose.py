@@ -5,7 +5,9 @@ added (every fit by least squares on the same prepared training movements, rows 
 levels), and ranks them:
 
 * candidates (:data:`CANDIDATES`): ``friction`` (Coulomb + viscous, the source's model), ``coulomb``, ``viscous``,
-  ``stribeck``, ``offset`` (a constant torque or current bias) and ``armature`` (rotor inertia);
+  ``stribeck``, ``offset`` (a constant torque or current bias), ``armature`` (rotor inertia) and
+  ``coulomb_asymmetric`` (one Coulomb level per direction, replacing the symmetric term: one more parameter per
+  joint);
 * weights: each joint's noise std ``s_j`` from the fit with every candidate term at once (the best-fitting model, as
   the free-floating diagnosis takes the smallest residual std); ``chi2 = sum_rows (r / s_j)^2 / kappa`` with
   ``kappa`` the movement's :meth:`~estimators.arm.identification.Preparation.correlation_factor`: the prepared
@@ -61,9 +63,10 @@ CANDIDATES: dict[str, tuple[tuple[str, ...], bool]] = {
     "stribeck": (("stribeck",), False),
     "offset": (("offset",), False),
     "armature": ((), True),
+    "coulomb_asymmetric": (("coulomb_asymmetric",), False),
 }
 #: candidates that are friction
-FRICTION_FAMILY = ("friction", "coulomb", "viscous", "stribeck")
+FRICTION_FAMILY = ("friction", "coulomb", "viscous", "stribeck", "coulomb_asymmetric")
 
 
 def extended_model(model: ArmIdentificationModel, candidate: str) -> ArmIdentificationModel | None:
@@ -77,6 +80,8 @@ def _with_terms(model: ArmIdentificationModel, terms: Iterable[str], armature: b
     """``model`` with the friction ``terms`` (and ``armature``) added, or ``None`` if it has them all."""
     present = set(model.regressor.friction.terms)
     wanted = present | set(terms)
+    if "coulomb_asymmetric" in wanted:  # it replaces the symmetric term (collinear with it)
+        wanted.discard("coulomb")
     if wanted == present and (not armature or model.regressor.armature):
         return None
     friction = tuple(t for t in FRICTION_TERMS if t in wanted)
