@@ -34,8 +34,10 @@ Alternation alone crawls along the weakly informed gains (20 000 iterations did 
 log), so after ``ALS_ITERATIONS`` of it the iteration takes Newton steps with the cost's exact Hessian (halved until
 the cost falls; an alternation step where no halving does). During the iteration one joint's gain is held (the reference joint, or for the gravity
 reference the joint with the most signal over noise; the gauge changes no prediction). Every step lowers the cost;
-the iteration stops when the cost's relative decrease falls below ``tolerance`` and no gain moved by more than
-``tolerance`` (relative), or after ``max_iterations`` (then ``converged`` is False). The final
+the iteration stops when a Newton step's predicted decrease (the Newton decrement ``g^T H^-1 g / 2``) is below
+``tolerance`` times the cost, or after ``max_iterations`` (then ``converged`` is False). A gain the data do not
+determine (a flat direction of the cost) stops the iteration too, since nothing is left to gain along it; its
+Cramér-Rao std says so. The final
 parameters are then fitted by the chosen estimator (``wls``, ``sdp``, a colony) on the rows with the gains fixed.
 """
 
@@ -51,8 +53,8 @@ from estimators.arm.model import ArmIdentificationModel, IdentificationRows
 from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 
-#: default convergence tolerance (relative cost decrease and relative gain change per iteration)
-GAIN_TOLERANCE = 1e-10
+#: default convergence tolerance: a Newton step's predicted decrease relative to the cost
+GAIN_TOLERANCE = 1e-12
 #: default iteration cap
 GAIN_MAX_ITERATIONS = 2000
 #: alternating least-squares iterations before the Newton steps
@@ -170,16 +172,15 @@ def identify_gains(
             new_c[free] = (moment @ beta)[free] / np.maximum(quadratic[free], 1e-300)
             new_beta = beta_step(new_c)
         else:
-            new_c, new_beta = newton
+            new_c, new_beta = newton[:2]
         if np.any(new_c <= 0.0):
             raise SpaceIdInputError(
                 f"--identify-gains: joint(s) {np.flatnonzero(new_c <= 0.0) + 1} got a non-positive gain; "
                 "their currents do not follow the model (check the logs' sign convention or the reference)"
             )
-        change = float(np.max(np.abs(new_c / c - 1.0)))
         c, beta = new_c, new_beta
         history.append(cost(c, beta))
-        if iterations > ALS_ITERATIONS and (history[-2] - history[-1]) <= tolerance * abs(history[-2]) and change <= tolerance:
+        if newton is not None and newton[2] <= tolerance * abs(history[-2]):
             converged = True
             break
     scale_gradient = np.zeros_like(beta)
@@ -209,9 +210,10 @@ def _newton_step(
     gram: FloatArray,
     moment: FloatArray,
     cost: Any,
-) -> tuple[FloatArray, FloatArray] | None:
+) -> tuple[FloatArray, FloatArray, float] | None:
     """One Newton step on the cost in (free ``c``, ``beta``) with its exact gradient and Hessian (the cost is a
-    polynomial of the Gram blocks), halved until the cost falls; ``None`` if no halving lowers it (the bilinear cost
+    polynomial of the Gram blocks), halved until the cost falls, with the Newton decrement ``-g . step / 2`` (the
+    decrease it predicts); ``None`` if no halving lowers it (the bilinear cost
     is not convex: the Hessian can be indefinite away from the minimum)."""
     n, r = gram.shape[0], gram.shape[1]
     g_beta = gram @ beta  # (n, r)
@@ -227,13 +229,14 @@ def _newton_step(
     keep = np.concatenate((free, np.ones(r, dtype=bool)))
     gradient = np.concatenate((grad_c, grad_beta))[keep]
     step = -np.linalg.lstsq(hessian[np.ix_(keep, keep)], gradient, rcond=None)[0]
+    decrement = max(-0.5 * float(gradient @ step), 0.0)
     full = np.zeros(n + r)
     full[keep] = step
     current = cost(c, beta)
     for _ in range(30):
         trial_c, trial_beta = c + full[:n], beta + full[n:]
         if np.all(trial_c > 0.0) and cost(trial_c, trial_beta) < current:
-            return trial_c, trial_beta
+            return trial_c, trial_beta, decrement
         full *= 0.5
     return None
 
