@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from estimators.arm.diagnose import diagnose_arm, extended_model
+from estimators.arm.diagnose import ArmDiagnosis, diagnose_arm, extended_model
 from estimators.arm.identification import Preparation, leave_one_out, load_movements, summary_table
 from estimators.arm.model import ArmIdentificationModel
 from estimators.evaluation import estimator_from_spec
@@ -63,11 +63,11 @@ def test_both_levels_are_constrained_non_negative_and_the_candidate_replaces_cou
     assert extended_model(model, "coulomb") is None and extended_model(model, "friction") is None
 
 
-def _diagnosis(ur5, truth: tuple[str, ...], seed: int, root: Path) -> str:
-    """The verdict of ``arm diagnose`` on a 10 s simulated log, for the model with symmetric Coulomb and viscous."""
+def _diagnosis(ur5, truth: tuple[str, ...], seed: int, root: Path) -> ArmDiagnosis:
+    """``arm diagnose`` on a 10 s simulated log, for the model with symmetric Coulomb and viscous friction."""
     dataset = simulate_arm_dataset(ur5, 10.0, truth, seed, "fourier", root / f"{truth[0]}-{seed}")
     model = ArmIdentificationModel.build(ur5, SYMMETRIC)
-    return diagnose_arm(model, {"log": dataset.simulation.log}, Preparation()).verdict
+    return diagnose_arm(model, {"log": dataset.simulation.log}, Preparation())
 
 
 def test_diagnose_names_asymmetric_friction_only_where_it_is(ur5, tmp_path: Path) -> None:
@@ -75,8 +75,10 @@ def test_diagnose_names_asymmetric_friction_only_where_it_is(ur5, tmp_path: Path
     nearest rival is an offset (the two differ only at rests and reversals), which it beat on 23 of 23 seeds tried
     (1-3, 10-29). Symmetric truth: no candidate significant on 23 of 23 seeds tried (smallest p 0.008 against the
     Bonferroni level 0.0025), so three seeds all ``none`` is what the statistics justify."""
-    assert _diagnosis(ur5, ASYMMETRIC, 1, tmp_path) == "coulomb_asymmetric"
-    assert [_diagnosis(ur5, SYMMETRIC, seed, tmp_path) for seed in (1, 2, 3)] == ["none"] * 3
+    named = _diagnosis(ur5, ASYMMETRIC, 1, tmp_path)
+    assert named.verdict == "coulomb_asymmetric" and named.family == "friction"
+    assert "|s(dq" in named.reason  # the residual's signature, significant on some joint (Bonferroni over 18 tests)
+    assert [_diagnosis(ur5, SYMMETRIC, seed, tmp_path).verdict for seed in (1, 2, 3)] == ["none"] * 3
 
 
 @pytest.mark.skipif(not UR5_REAL.is_dir(), reason=f"the real UR5 logs are not at {UR5_REAL}")
