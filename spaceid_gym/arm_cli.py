@@ -10,7 +10,16 @@ import time
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
+from estimators.arm.controller_model import (
+    CONTROLLER_FRICTION,
+    controller_estimator_label,
+    controller_model_leave_one_out,
+    load_controller_rows,
+)
 from estimators.arm.diagnose import diagnose_arm, where_it_fails
+from estimators.arm.gains import identify_gains, scaled_rows
 from estimators.arm.identification import (
     Preparation,
     cross_validation_markdown,
@@ -19,6 +28,7 @@ from estimators.arm.identification import (
     load_movements,
     prediction_error,
     processed_noise_floor,
+    raw_period,
     simulated_noise_std,
     summary_table,
 )
@@ -126,9 +136,22 @@ def _add_data_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, required=True, help="output folder")
 
 
+def _add_gain_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--identify-gains`` and its reference (identify and cross-validate)."""
+    parser.add_argument(
+        "--identify-gains", action="store_true", help="identify the motor torque constants with the parameters (current logs)"
+    )
+    parser.add_argument(
+        "--gain-reference",
+        default="gravity",
+        help="what fixes the gains' scale: 'gravity' (the URDF's gravity torques) or 'joint:J[,J2...]' (these joints keep the model's constants) (default gravity)",
+    )
+
+
 def add_arm_identify_arguments(parser: argparse.ArgumentParser) -> None:
     """The arguments of ``spaceid arm identify``."""
     _add_data_arguments(parser)
+    _add_gain_arguments(parser)
     parser.add_argument("--train", default=None, help="comma-separated training movements (default: all but --validate)")
     parser.add_argument("--validate", default=None, help="comma-separated held-out movements (default none)")
     parser.add_argument(
@@ -141,6 +164,7 @@ def add_arm_identify_arguments(parser: argparse.ArgumentParser) -> None:
 def add_arm_cross_validate_arguments(parser: argparse.ArgumentParser) -> None:
     """The arguments of ``spaceid arm cross-validate``."""
     _add_data_arguments(parser)
+    _add_gain_arguments(parser)
     parser.add_argument("--movements", default=None, help="comma-separated movements (default all)")
     parser.add_argument(
         "--estimators",
@@ -149,6 +173,16 @@ def add_arm_cross_validate_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--compare-without-friction", action="store_true", help="also fit the model without friction (the error friction removes)"
+    )
+    parser.add_argument(
+        "--ur-model-friction",
+        default=",".join(CONTROLLER_FRICTION),
+        help=f"friction terms of UR's refitted model (default {','.join(CONTROLLER_FRICTION)})",
+    )
+    parser.add_argument(
+        "--compare-ur-model",
+        action="store_true",
+        help="also refit UR's own model on the same folds (real logs: per joint current ~ gain x m_target + friction)",
     )
     add_executor_arguments(parser)
 
@@ -210,9 +244,25 @@ def run_arm_identify(args: argparse.Namespace) -> None:
     model = _model(args)
     estimator = estimator_from_spec(args.estimator, seed=args.seed)
     rows = preparation.all_rows(model, raw)
+    gains = None
+    if args.identify_gains:
+        kappa = max(preparation.correlation_factor(raw_period(raw[n])) for n in train)
+        gains = identify_gains(model, {n: rows[n] for n in train}, args.gain_reference, kappa=kappa)
+        rows = scaled_rows(rows, gains.correction)
+        print(
+            f"torque constants (N m/A, reference {args.gain_reference}, {gains.iterations} iterations, "
+            f"converged {gains.converged}): " + " ".join(f"{k:.3f}" for k in gains.torque_constants_Nm_A)
+        )
+        if gains.gain_std_relative is not None:
+            print(
+                "  Cramér-Rao std of each (%, the filtered rows' correlation accounted for): "
+                + " ".join(f"{100 * v:.1f}" for v in gains.gain_std_relative)
+            )
     estimate = fit(model, {n: rows[n] for n in train}, estimator)
     args.out.mkdir(parents=True, exist_ok=True)
     estimate.extra.update(model=model.describe(), preparation=preparation.as_dict())
+    if gains is not None:
+        estimate.extra["gains"] = gains.to_dict()
     estimate.write_json(args.out / "estimate.json")
     errors = [prediction_error(model, estimate.theta, rows[name], floors[name]) for name in validate]
     write_json_atomic(
@@ -264,7 +314,15 @@ def run_arm_cross_validate(args: argparse.Namespace) -> None:
     if args.compare_without_friction:
         models["without friction"] = _model(args, ())
     start = time.perf_counter()
-    rows = leave_one_out(models, logs, estimators, preparation, floors, executor)
+    gain_reference = args.gain_reference if args.identify_gains else None
+    rows = leave_one_out(models, logs, estimators, preparation, floors, executor, gain_reference)
+    implied_gains = None
+    if getattr(args, "compare_ur_model", False):
+        terms = parse_friction(args.ur_model_friction)
+        controller = load_controller_rows(args.data, logs, preparation, terms)
+        controller_rows, coefficients = controller_model_leave_one_out(controller, floors, controller_estimator_label(terms))
+        rows += controller_rows
+        implied_gains = {name: (1.0 / c[:, 0]).tolist() for name, c in coefficients.items()}
     joint_names = [f"joint {j + 1}" for j in range(next(iter(models.values())).n_joints)]
     args.out.mkdir(parents=True, exist_ok=True)
     summary = summary_table(rows)
@@ -278,6 +336,7 @@ def run_arm_cross_validate(args: argparse.Namespace) -> None:
             "rows": [r.to_dict() for r in rows],
             "wall_time_s": time.perf_counter() - start,
             "executor": executor.describe(),
+            "ur_model_torque_constants_Nm_A": implied_gains,
         },
     )
     print(
@@ -291,6 +350,18 @@ def run_arm_cross_validate(args: argparse.Namespace) -> None:
             f"  {entry['model']:<28} {entry['estimator']:<60} {cells} | {entry['mean_overall_percent']:6.1f} %"
             f" | consistent: {entry['all_consistent']} | {entry['mean_wall_time_s']:.2f} s/fit"
             + ("" if excess is None else f" | cost over sdp: {100.0 * excess:+.4f} % (largest)")
+        )
+    identified = [r.torque_constants_Nm_A for r in rows if r.torque_constants_Nm_A is not None]
+    if identified:
+        print(
+            f"torque constants identified (N m/A, reference {gain_reference}, mean over folds): "
+            + " ".join(f"{v:.2f}" for v in np.mean(identified, axis=0))
+        )
+    if implied_gains:
+        mean = np.mean(list(implied_gains.values()), axis=0)
+        print(
+            "torque constants UR's refitted model implies (1 / gain, N m/A, mean over folds): "
+            + " ".join(f"{v:.2f}" for v in mean)
         )
     print(f"wrote {args.out}/table.md, rows.json")
 

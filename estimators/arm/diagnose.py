@@ -5,7 +5,9 @@ added (every fit by least squares on the same prepared training movements, rows 
 levels), and ranks them:
 
 * candidates (:data:`CANDIDATES`): ``friction`` (Coulomb + viscous, the source's model), ``coulomb``, ``viscous``,
-  ``stribeck``, ``offset`` (a constant torque or current bias) and ``armature`` (rotor inertia);
+  ``stribeck``, ``offset`` (a constant torque or current bias), ``armature`` (rotor inertia) and
+  ``coulomb_asymmetric`` (one Coulomb level per direction, replacing the symmetric term: one more parameter per
+  joint);
 * weights: each joint's noise std ``s_j`` from the fit with every candidate term at once (the best-fitting model, as
   the free-floating diagnosis takes the smallest residual std); ``chi2 = sum_rows (r / s_j)^2 / kappa`` with
   ``kappa`` the movement's :meth:`~estimators.arm.identification.Preparation.correlation_factor`: the prepared
@@ -14,8 +16,9 @@ levels), and ranks them:
 * scores: likelihood ratio ``chi2_baseline - chi2_candidate`` against chi-square with as many degrees of freedom as
   base parameters added (Bonferroni over the candidates: significant below ``alpha / m``), BIC ``chi2 + k ln N``, and
   the fraction of the baseline's excess over the noise (``chi2_baseline - (N - k)``) the candidate explains;
-* evidence in the residual: per joint, the correlation of the baseline residual with ``sign(dq_j)`` and ``dq_j`` (the
-  signatures of Coulomb and viscous friction), with a two-sided test;
+* evidence in the residual: per joint, the correlation of the baseline residual with ``sign(dq_j)``, ``dq_j`` and
+  ``|s(dq_j)|`` (the signatures of Coulomb friction, viscous friction, and a friction level that differs with the
+  direction, or an offset, against a model with symmetric Coulomb friction), with a two-sided test;
 * verdict: the significant candidate with the lowest BIC if it explains at least
   :data:`~estimators.diagnostics.diagnose.EXPLAINED_FRACTION` of the excess; ``"none"`` when no candidate is
   significant; ``"unexplained"`` otherwise. ``family`` says ``"friction"`` for the four friction terms.
@@ -61,9 +64,10 @@ CANDIDATES: dict[str, tuple[tuple[str, ...], bool]] = {
     "stribeck": (("stribeck",), False),
     "offset": (("offset",), False),
     "armature": ((), True),
+    "coulomb_asymmetric": (("coulomb_asymmetric",), False),
 }
 #: candidates that are friction
-FRICTION_FAMILY = ("friction", "coulomb", "viscous", "stribeck")
+FRICTION_FAMILY = ("friction", "coulomb", "viscous", "stribeck", "coulomb_asymmetric")
 
 
 def extended_model(model: ArmIdentificationModel, candidate: str) -> ArmIdentificationModel | None:
@@ -77,6 +81,8 @@ def _with_terms(model: ArmIdentificationModel, terms: Iterable[str], armature: b
     """``model`` with the friction ``terms`` (and ``armature``) added, or ``None`` if it has them all."""
     present = set(model.regressor.friction.terms)
     wanted = present | set(terms)
+    if "coulomb_asymmetric" in wanted:  # it replaces the symmetric term (collinear with it)
+        wanted.discard("coulomb")
     if wanted == present and (not armature or model.regressor.armature):
         return None
     friction = tuple(t for t in FRICTION_TERMS if t in wanted)
@@ -118,23 +124,32 @@ class ArmModelFit(CandidateScores):
 
 @dataclass
 class ResidualCorrelation:
-    """Per joint (n,): correlation of the baseline residual with ``sign(dq_j)`` and ``dq_j``, and two-sided p-values."""
+    """Per joint (n,): correlation of the baseline residual with ``sign(dq_j)``, ``dq_j`` and ``|s(dq_j)|`` (the smooth
+    sign's magnitude: 1 when the joint moves, 0 at rest; the signature of asymmetric Coulomb friction, or of an offset,
+    left out of a model with symmetric Coulomb friction), and two-sided p-values."""
 
     with_sign: FloatArray
     with_rate: FloatArray
     p_sign: FloatArray
     p_rate: FloatArray
+    with_moving: FloatArray | None = None
+    p_moving: FloatArray | None = None
 
     def describe(self, alpha: float) -> str:
-        """The joints whose residual correlates significantly (Bonferroni over 2 n tests)."""
-        level = alpha / (2 * len(self.with_sign))
+        """The joints whose residual correlates significantly (Bonferroni over all the tests)."""
+        n = len(self.with_sign)
+        moving = (
+            (np.zeros(n), np.ones(n)) if self.with_moving is None or self.p_moving is None else (self.with_moving, self.p_moving)
+        )
+        level = alpha / ((2 if self.with_moving is None else 3) * n)
         parts = []
-        for j in range(len(self.with_sign)):
+        for j in range(n):
             hits = [
                 f"{name} (r = {value:+.2f})"
                 for name, value, p in (
                     (f"sign(dq{j + 1})", self.with_sign[j], self.p_sign[j]),
                     (f"dq{j + 1}", self.with_rate[j], self.p_rate[j]),
+                    (f"|s(dq{j + 1})|", moving[0][j], moving[1][j]),
                 )
                 if p < level
             ]
@@ -177,6 +192,8 @@ class ArmDiagnosis:
                 "with_dq": c.with_rate.tolist(),
                 "p_sign_dq": c.p_sign.tolist(),
                 "p_dq": c.p_rate.tolist(),
+                "with_abs_smooth_sign_dq": None if c.with_moving is None else c.with_moving.tolist(),
+                "p_abs_smooth_sign_dq": None if c.p_moving is None else c.p_moving.tolist(),
             },
             **self.extra,
         }
@@ -211,13 +228,17 @@ def _correlation(model: ArmIdentificationModel, theta: FloatArray, rows: Mapping
         t = r * math.sqrt((n - 2) / max(1.0 - r * r, 1e-300))
         return r, float(2.0 * stats.t.sf(abs(t), n - 2))
 
+    magnitude = np.abs(model.regressor.friction.smooth_sign(dq))
     sign = [corr(residual[:, j], np.sign(dq[:, j])) for j in range(dq.shape[1])]
     rate = [corr(residual[:, j], dq[:, j]) for j in range(dq.shape[1])]
+    moving = [corr(residual[:, j], magnitude[:, j]) for j in range(dq.shape[1])]
     return ResidualCorrelation(
         np.array([s[0] for s in sign]),
         np.array([r[0] for r in rate]),
         np.array([s[1] for s in sign]),
         np.array([r[1] for r in rate]),
+        np.array([m[0] for m in moving]),
+        np.array([m[1] for m in moving]),
     )
 
 

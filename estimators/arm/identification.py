@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from estimators.arm.gains import identify_gains, scaled_rows
 from estimators.arm.linear_ls import group_weighted
 from estimators.arm.linear_problem import LinearIdentificationProblem
 from estimators.arm.model import ArmIdentificationModel, IdentificationRows
@@ -220,8 +221,12 @@ def prediction_error(
     model: ArmIdentificationModel, beta: FloatArray, rows: IdentificationRows, noise_floor: FloatArray | None = None
 ) -> PredictionError:
     """The figures of base parameters ``beta`` (r,) on one movement's rows (module docstring)."""
-    log = rows.log
-    residual = log.effort - model.predict(beta, rows)
+    return error_of_prediction(rows.log, model.predict(beta, rows), noise_floor)
+
+
+def error_of_prediction(log: ArmLog, predicted: FloatArray, noise_floor: FloatArray | None = None) -> PredictionError:
+    """The figures (module docstring) of any prediction (T, n) of a prepared log's effort, whatever model made it."""
+    residual = log.effort - predicted
     relative = 100.0 * np.linalg.norm(residual, axis=0) / np.maximum(np.linalg.norm(log.effort, axis=0), 1e-300)
     overall = 100.0 * float(np.linalg.norm(residual) / max(np.linalg.norm(log.effort), 1e-300))
     rms = np.sqrt(np.mean(residual**2, axis=0))
@@ -249,7 +254,8 @@ class CrossValidationRow:
     """One held-out movement, one estimator, one model: the estimate's facts and its :class:`PredictionError`.
 
     ``cost_excess_over_sdp``: a consistent colony's training cost over the ``sdp`` optimum of the same cost, relative
-    (``extra["cost_excess_over_sdp"]``), else ``None``.
+    (``extra["cost_excess_over_sdp"]``), else ``None``. ``torque_constants_Nm_A``: the gains identified on the training
+    movements (``gain_reference`` of :func:`leave_one_out`), else ``None``.
     """
 
     model: str
@@ -259,6 +265,7 @@ class CrossValidationRow:
     wall_time_s: float
     n_evaluations: float
     cost_excess_over_sdp: float | None = None
+    torque_constants_Nm_A: list[float] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready."""
@@ -269,6 +276,7 @@ class CrossValidationRow:
             "wall_time_s": self.wall_time_s,
             "n_evaluations": self.n_evaluations,
             "cost_excess_over_sdp": self.cost_excess_over_sdp,
+            "torque_constants_Nm_A": self.torque_constants_Nm_A,
             **self.error.to_dict(),
         }
 
@@ -288,6 +296,7 @@ def leave_one_out(
     preparation: Preparation,
     noise_floors: Mapping[str, FloatArray | None] | None = None,
     executor: ExecutorSpec | None = None,
+    gain_reference: str | None = None,
 ) -> list[CrossValidationRow]:
     """For every movement, model and estimator: fit on the other movements, error on the held-out one.
 
@@ -301,12 +310,14 @@ def leave_one_out(
         preparation: the signal chain.
         noise_floors: movement -> processed noise std (n,) when known.
         executor: where the folds run (:mod:`spaceid_gym.executors`).
+        gain_reference: identify the torque constants on each fold's training movements with this reference
+            (:func:`estimators.arm.gains.identify_gains`), then fit with them; ``None``: the model's constants.
     """
     if len(logs) < 2:
         raise SpaceIdInputError(f"leave-one-out: needs at least two movements, got {list(logs)}")
     model_rows = {label: preparation.all_rows(model, logs) for label, model in models.items()}
     floors = noise_floors or {}
-    folds = [_Fold(held, dict(models), model_rows, dict(estimators), floors.get(held)) for held in logs]
+    folds = [_Fold(held, dict(models), model_rows, dict(estimators), floors.get(held), gain_reference) for held in logs]
     results = run_jobs(_run_fold, folds, executor or ExecutorSpec("serial"), desc="cross-validate", unit="fold")
     return [row for rows in results for row in rows]
 
@@ -320,6 +331,7 @@ class _Fold:
     model_rows: dict[str, dict[str, IdentificationRows]]
     estimators: dict[str, Estimator]
     noise_floor: FloatArray | None
+    gain_reference: str | None = None
 
 
 def _run_fold(fold: _Fold) -> list[CrossValidationRow]:
@@ -328,9 +340,14 @@ def _run_fold(fold: _Fold) -> list[CrossValidationRow]:
     for model_label, model in fold.models.items():
         movements = fold.model_rows[model_label]
         train = {name: item for name, item in movements.items() if name != fold.held}
+        held, gains = movements[fold.held], None
+        if fold.gain_reference is not None:
+            found = identify_gains(model, train, fold.gain_reference)
+            train, held = scaled_rows(train, found.correction), scaled_rows({fold.held: held}, found.correction)[fold.held]
+            gains = found.torque_constants_Nm_A.tolist()
         for label, estimator in fold.estimators.items():
             estimate = fit(model, train, estimator)
-            error = prediction_error(model, estimate.theta, movements[fold.held], fold.noise_floor)
+            error = prediction_error(model, estimate.theta, held, fold.noise_floor)
             rows.append(
                 CrossValidationRow(
                     model_label,
@@ -340,6 +357,7 @@ def _run_fold(fold: _Fold) -> list[CrossValidationRow]:
                     estimate.wall_time_s,
                     estimate.n_evaluations,
                     estimate.extra.get("cost_excess_over_sdp"),
+                    gains,
                 )
             )
     return rows

@@ -250,9 +250,11 @@ class ArmIdentificationModel:
             "viscous": (zero, fraction / robot.dq_limit_rad_s),
             "stribeck": (zero, fraction),
             "offset": (-fraction, fraction),
+            "coulomb_positive": (zero, fraction),
+            "coulomb_negative": (zero, fraction),
         }
-        lower = [per_term[t][0][j] for j in range(self.n_joints) for t in friction.terms]
-        upper = [per_term[t][1][j] for j in range(self.n_joints) for t in friction.terms]
+        lower = [per_term[c][0][j] for j in range(self.n_joints) for c in friction.columns]
+        upper = [per_term[c][1][j] for j in range(self.n_joints) for c in friction.columns]
         if self.regressor.armature:
             lower += [0.0] * self.n_joints
             upper += list(fraction / robot.ddq_limit_rad_s2)
@@ -267,7 +269,7 @@ class ArmIdentificationModel:
         ``MIN_SIZE_M``): mass ``[0, m_hi]``, first moments ``+-m_hi s``, diagonal inertia ``[0, 2 m_hi s^2]``,
         products ``+-m_hi s^2``. Per joint, with ``f = FRICTION_FRACTION_OF_LIMIT x`` its torque limit: Coulomb and
         Stribeck excess ``[0, f]``, viscous ``[0, f / rate limit]``, offset ``+-f``, armature ``[0, f / acceleration
-        limit]``.
+        limit]``; each direction's Coulomb level like Coulomb.
         """
         masses, size = self._link_bounds()
         m_hi = masses[:, 1]

@@ -7,10 +7,17 @@ Per joint j (rate ``dq`` in rad/s, torque in N m)::
           + (fs - fc) exp(-(dq / vs)^2) s(dq)          "stribeck"  fs - fc [N m]  (optional)
           + f0                                         "offset"    f0  [N m]      (optional)
 
+or, instead of the symmetric Coulomb term, one Coulomb level per direction (the two ``>= 0``)::
+
+          fc+ max(s(dq), 0) + fc- min(s(dq), 0)        "coulomb_asymmetric"  fc+, fc- [N m]  (optional)
+
 Coulomb + viscous is the model of the source document (``tau_f = fc sign(dq) + fv dq``). The
 Stribeck term is linear in its coefficient because the Stribeck velocity ``vs`` is fixed (not
 identified): the coefficient is the excess of static over Coulomb friction, ``fs - fc``. The offset
-absorbs a constant bias of the torque (or current) measurement.
+absorbs a constant bias of the torque (or current) measurement. The asymmetric Coulomb term replaces ``coulomb``
+(the two together are collinear: ``s = max(s, 0) + min(s, 0)``); its difference from a symmetric Coulomb term and an
+offset, ``(fc+ - fc-) / 2 |s(dq)|`` against a constant, shows only where the joint rests or reverses
+(``|s| < 1``), so the data tell the two apart only through their rests and reversals.
 
 The sign near zero speed
 ------------------------
@@ -33,9 +40,26 @@ from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 
 #: Every friction term, in the order their coefficients appear per joint.
-FRICTION_TERMS: tuple[str, ...] = ("coulomb", "viscous", "stribeck", "offset")
-#: The unit suffix of each term's coefficient in parameter names.
-FRICTION_UNITS: dict[str, str] = {"coulomb": "Nm", "viscous": "Nms", "stribeck": "Nm", "offset": "Nm"}
+FRICTION_TERMS: tuple[str, ...] = ("coulomb", "coulomb_asymmetric", "viscous", "stribeck", "offset")
+#: The coefficients (columns per joint) of each term.
+TERM_COLUMNS: dict[str, tuple[str, ...]] = {
+    "coulomb": ("coulomb",),
+    "viscous": ("viscous",),
+    "stribeck": ("stribeck",),
+    "offset": ("offset",),
+    "coulomb_asymmetric": ("coulomb_positive", "coulomb_negative"),
+}
+#: The unit suffix of each coefficient in parameter names.
+FRICTION_UNITS: dict[str, str] = {
+    "coulomb": "Nm",
+    "viscous": "Nms",
+    "stribeck": "Nm",
+    "offset": "Nm",
+    "coulomb_positive": "Nm",
+    "coulomb_negative": "Nm",
+}
+#: Terms that cannot be in one model together (their columns are collinear).
+EXCLUSIVE_TERMS: tuple[tuple[str, str], ...] = (("coulomb", "coulomb_asymmetric"),)
 
 
 @dataclass(frozen=True)
@@ -60,6 +84,11 @@ class FrictionModel:
             raise SpaceIdInputError(f"friction: unknown term(s) {unknown}; expected a subset of {list(FRICTION_TERMS)}")
         if len(set(terms)) != len(terms):
             raise SpaceIdInputError(f"friction: duplicated term in {list(terms)}")
+        for first, second in EXCLUSIVE_TERMS:
+            if first in terms and second in terms:
+                raise SpaceIdInputError(
+                    f"friction: {first!r} and {second!r} cannot be in one model (collinear columns); keep one of them"
+                )
         object.__setattr__(self, "terms", tuple(t for t in FRICTION_TERMS if t in terms))
         if not (np.isfinite(self.coulomb_smoothing_rad_s) and self.coulomb_smoothing_rad_s >= 0):
             raise SpaceIdInputError(f"friction: coulomb_smoothing_rad_s must be >= 0, got {self.coulomb_smoothing_rad_s!r}")
@@ -78,13 +107,18 @@ class FrictionModel:
         return cls(terms=tuple(friction))
 
     @property
+    def columns(self) -> tuple[str, ...]:
+        """The coefficients of one joint, in order (:data:`TERM_COLUMNS` of each term)."""
+        return tuple(column for term in self.terms for column in TERM_COLUMNS[term])
+
+    @property
     def n_terms(self) -> int:
-        """Number of coefficients per joint."""
-        return len(self.terms)
+        """Number of coefficients per joint (``len(columns)``)."""
+        return len(self.columns)
 
     def parameter_names(self, n_joints: int) -> list[str]:
         """Coefficient names, joint-major: ``joint1_coulomb_Nm, joint1_viscous_Nms, joint2_...`` (length n k)."""
-        return [f"joint{j + 1}_{term}_{FRICTION_UNITS[term]}" for j in range(n_joints) for term in self.terms]
+        return [f"joint{j + 1}_{column}_{FRICTION_UNITS[column]}" for j in range(n_joints) for column in self.columns]
 
     def smooth_sign(self, dq_rad_s: FloatArray) -> FloatArray:
         """``s(dq)``: ``tanh(dq / v_eps)``, or ``sign(dq)`` if ``v_eps = 0``; same shape as ``dq``."""
@@ -100,14 +134,16 @@ class FrictionModel:
             dq_rad_s: joint rates, shape (T, n), rad/s.
 
         Returns:
-            shape (T, n, k), k = :attr:`n_terms`, columns in :attr:`terms` order.
+            shape (T, n, k), k = :attr:`n_terms`, in :attr:`columns` order.
         """
         dq = np.asarray(dq_rad_s, dtype=float)
         columns = []
-        s = self.smooth_sign(dq) if {"coulomb", "stribeck"} & set(self.terms) else None
+        s = self.smooth_sign(dq) if {"coulomb", "stribeck", "coulomb_asymmetric"} & set(self.terms) else None
         for term in self.terms:
             if term == "coulomb":
                 columns.append(s)
+            elif term == "coulomb_asymmetric":
+                columns += [np.maximum(s, 0.0), np.minimum(s, 0.0)]
             elif term == "viscous":
                 columns.append(dq)
             elif term == "stribeck":
@@ -119,7 +155,7 @@ class FrictionModel:
         return np.stack(columns, axis=-1)
 
     def torque(self, dq_rad_s: FloatArray, coefficients: FloatArray) -> FloatArray:
-        """Friction torque, shape (T, n), N m, for coefficients of shape (n, k) (joint j, term in :attr:`terms` order)."""
+        """Friction torque, shape (T, n), N m, for coefficients of shape (n, k) (joint j, in :attr:`columns` order)."""
         coefficients = np.asarray(coefficients, dtype=float)
         features = self.features(dq_rad_s)
         if coefficients.shape != features.shape[-2:]:

@@ -91,6 +91,8 @@ SAMPLE_RATE_HZ = 125.0
 COULOMB_FRACTION = 0.05
 VISCOUS_FRACTION = 0.03
 STRIBECK_FRACTION_OF_COULOMB = 0.3
+#: the default asymmetric Coulomb friction: (1 + a) and (1 - a) times the Coulomb level in the + and - directions
+COULOMB_ASYMMETRY = 0.3
 
 
 # ---------------------------------------------------------------------- sensors
@@ -249,7 +251,7 @@ def default_friction_coefficients(robot: ArmRobot, friction: FrictionModel | Seq
 
     Coulomb ``COULOMB_FRACTION * torque limit`` (N m), viscous ``VISCOUS_FRACTION * torque limit /
     rate limit`` (N m s/rad), Stribeck excess ``STRIBECK_FRACTION_OF_COULOMB * coulomb`` (N m),
-    offset 0. For the UR5: 7.5 / 1.4 N m and 1.43 / 0.27 N m s/rad on the 150 / 28 N m joints.
+    offset 0; asymmetric Coulomb ``(1 +- COULOMB_ASYMMETRY) * coulomb`` in the + and - directions. For the UR5: 7.5 / 1.4 N m and 1.43 / 0.27 N m s/rad on the 150 / 28 N m joints.
     """
     model = FrictionModel.coerce(friction)
     coulomb = COULOMB_FRACTION * robot.torque_limit_Nm
@@ -258,8 +260,10 @@ def default_friction_coefficients(robot: ArmRobot, friction: FrictionModel | Seq
         "viscous": VISCOUS_FRACTION * robot.torque_limit_Nm / robot.dq_limit_rad_s,
         "stribeck": STRIBECK_FRACTION_OF_COULOMB * coulomb,
         "offset": np.zeros(robot.n_joints),
+        "coulomb_positive": (1.0 + COULOMB_ASYMMETRY) * coulomb,
+        "coulomb_negative": (1.0 - COULOMB_ASYMMETRY) * coulomb,
     }
-    return np.stack([values[t] for t in model.terms], axis=1) if model.terms else np.zeros((robot.n_joints, 0))
+    return np.stack([values[c] for c in model.columns], axis=1) if model.terms else np.zeros((robot.n_joints, 0))
 
 
 def nominal_parameters(regressor: ArmRegressor) -> FloatArray:
