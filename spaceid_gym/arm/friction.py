@@ -103,20 +103,18 @@ class FrictionModel:
             shape (T, n, k), k = :attr:`n_terms`, columns in :attr:`terms` order.
         """
         dq = np.asarray(dq_rad_s, dtype=float)
-        columns = []
-        s = self.smooth_sign(dq) if {"coulomb", "stribeck"} & set(self.terms) else None
-        for term in self.terms:
+        out = np.empty((*dq.shape, len(self.terms)))
+        s = self.smooth_sign(dq) if ("coulomb" in self.terms or "stribeck" in self.terms) else None
+        for i, term in enumerate(self.terms):
             if term == "coulomb":
-                columns.append(s)
+                out[..., i] = s
             elif term == "viscous":
-                columns.append(dq)
+                out[..., i] = dq
             elif term == "stribeck":
-                columns.append(np.exp(-((dq / self.stribeck_velocity_rad_s) ** 2)) * s)
+                out[..., i] = np.exp(-((dq / self.stribeck_velocity_rad_s) ** 2)) * s
             else:  # offset
-                columns.append(np.ones_like(dq))
-        if not columns:
-            return np.zeros((*dq.shape, 0))
-        return np.stack(columns, axis=-1)
+                out[..., i] = 1.0
+        return out
 
     def torque(self, dq_rad_s: FloatArray, coefficients: FloatArray) -> FloatArray:
         """Friction torque, shape (T, n), N m, for coefficients of shape (n, k) (joint j, term in :attr:`terms` order)."""
