@@ -266,10 +266,8 @@ class ManipulatorIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         self._ddq_ref = ddq
         obs, gain, q = self._measure_and_learn(torque, ddq_true)
         weights = self.reward_weights
-        excess_q = np.maximum(np.abs(q - self._joint_mid) * self._inv_tenth_half - 9.0, 0.0)
-        excess_u = np.maximum(np.abs(torque) / self.robot.torque_limit_Nm * 10.0 - 9.0, 0.0)
-        penalty_q = weights.joint_limit * float(excess_q @ excess_q)
-        penalty_u = weights.torque_limit * float(excess_u @ excess_u)
+        excess_q, excess_u = _limit_excesses(q, self._joint_mid, self._inv_tenth_half, torque, self.robot.torque_limit_Nm)
+        penalty_q, penalty_u = weights.joint_limit * excess_q, weights.torque_limit * excess_u
         info = {
             "truth": self.truth(),
             "information_gain": gain,
@@ -352,3 +350,18 @@ def _reference_acceleration(
         command = min(max(command, (v_low - dq) / period_s), (v_high - dq) / period_s)
         ddq[j] = min(max(command, -limit), limit)
     return ddq
+
+
+@njit(cache=True)
+def _limit_excesses(
+    q: FloatArray, joint_mid: FloatArray, inv_tenth_half: FloatArray, torque: FloatArray, torque_limit: FloatArray
+) -> tuple[float, float]:
+    """The penalties' sums of squares: ``sum_j max(0, (|q_j - mid_j| / half_j - 0.9) / 0.1)^2`` and the same of
+    ``|u_j| / limit_j`` (see the class docstring, *Rewards*)."""
+    joints, torques = 0.0, 0.0
+    for j in range(q.shape[0]):
+        excess = max(abs(q[j] - joint_mid[j]) * inv_tenth_half[j] - 9.0, 0.0)
+        joints += excess * excess
+        excess = max(abs(torque[j]) / torque_limit[j] * 10.0 - 9.0, 0.0)
+        torques += excess * excess
+    return joints, torques
