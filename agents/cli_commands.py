@@ -9,13 +9,16 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import time
 from pathlib import Path
 from typing import Any
 
+from agents.arm_comparison import ARM_METHODS, optimise_arm_designs, run_arm_comparison, write_arm_comparison
 from agents.comparison import run_comparison, write_comparison
 from agents.policy import DEFAULT_ATTITUDE_WEIGHT, ExcitationPolicy, train_excitation
 from spaceid_gym.datasets import Excitation, FeedbackExcitation
+from spaceid_gym.envs.manipulator import ManipulatorIDEnv
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.excitation import FourierExcitation
 from spaceid_gym.fuel_excitation_design import load_fourier_excitation, optimise_fourier_excitation, write_fourier_design
@@ -27,7 +30,7 @@ SHIPPED_POLICIES = Path(__file__).parent / "policies"
 
 
 def add_excite_arguments(sub: Any) -> None:
-    """The ``excite`` command and its subcommands ``fourier``, ``train``, ``compare``."""
+    """The ``excite`` command and its subcommands ``fourier``, ``train``, ``compare``, ``compare-arm``."""
     excite = sub.add_parser("excite", help="design excitations: optimised Fourier series, a learnt policy, their comparison")
     commands = excite.add_subparsers(dest="excite_command", required=True)
 
@@ -67,10 +70,19 @@ def add_excite_arguments(sub: Any) -> None:
     compare.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
     compare.add_argument("--out", type=Path, required=True, help="output folder")
 
+    arm = commands.add_parser(
+        "compare-arm", help="the arm (ManipulatorID-v0): random, one joint at a time and optimised Fourier on the same windows"
+    )
+    arm.add_argument("--episodes", type=int, default=20, help="windows (default 20)")
+    arm.add_argument("--first-window", type=int, default=0, help="index of the first window (default 0)")
+    arm.add_argument("--duration", type=float, default=30.0, help="window, s (default 30, the env's)")
+    arm.add_argument("--seed", type=int, default=0, help="seed of the optimised trajectories' random starts")
+    arm.add_argument("--out", type=Path, required=True, help="output folder")
+
 
 def run_excite(args: argparse.Namespace) -> None:
     """Run ``spaceid excite <command>``."""
-    {"fourier": _fourier, "train": _train, "compare": _compare}[args.excite_command](args)
+    {"fourier": _fourier, "train": _train, "compare": _compare, "compare-arm": _compare_arm}[args.excite_command](args)
 
 
 def excitation_source(spec: Path | None, robot: Robot, seed: int) -> tuple[Excitation | FeedbackExcitation, dict[str, Any]]:
@@ -139,3 +151,23 @@ def _compare(args: argparse.Namespace) -> None:
     n_methods = len({r["method"] for r in rows})
     written = ", ".join(p.name for p in paths.values())
     print(f"{args.episodes} held-out windows x {n_methods} methods in {info['wall_time_s']:.0f} s; wrote {written}")
+
+
+def _compare_arm(args: argparse.Namespace) -> None:
+    check_count(args.episodes, "--episodes", 100_000)
+    if args.first_window < 0:
+        raise SpaceIdInputError(f"--first-window: expected an index >= 0, got {args.first_window}")
+    if not (math.isfinite(args.duration) and args.duration > 0):
+        raise SpaceIdInputError(f"--duration: expected a window > 0 s, got {args.duration}")
+    started = time.perf_counter()
+    env = ManipulatorIDEnv()
+    print(f"optimising the arm's Fourier trajectories (seed {args.seed}) ...")
+    designs = optimise_arm_designs(env, seed=args.seed)
+    rows = run_arm_comparison(args.episodes, args.duration, args.first_window, designs, env)
+    info = {"robot": env.robot.name, "episodes": args.episodes, "first_window": args.first_window, "duration_s": args.duration,
+            "design_seed": args.seed, "wall_time_s": round(time.perf_counter() - started, 1)}  # fmt: skip
+    paths = write_arm_comparison(args.out, rows, info)
+    print(paths["table"].read_text())
+    print(
+        f"{args.episodes} windows x {len(ARM_METHODS)} methods in {info['wall_time_s']:.0f} s; wrote {', '.join(p.name for p in paths.values())}"
+    )

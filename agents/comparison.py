@@ -192,17 +192,25 @@ def markdown_table(summary: Sequence[dict[str, Any]]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def write_tables(
+    folder: Path, rows: list[dict[str, Any]], summary: list[dict[str, Any]], table: str, info: dict[str, Any]
+) -> dict[str, Path]:
+    """Write ``episodes.csv`` (the rows), ``summary.csv`` and ``table.md`` (the settings in ``info`` as comments, then
+    ``table``) to ``folder`` (created)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    preamble = "".join(f"<!-- {k}: {v} -->\n" for k, v in info.items())
+    return {
+        "episodes": write_csv_atomic(folder / "episodes.csv", rows),
+        "summary": write_csv_atomic(folder / "summary.csv", summary),
+        "table": write_text_atomic(folder / "table.md", preamble + table),
+    }
+
+
 def write_comparison(out: str | Path, rows: list[dict[str, Any]], info: dict[str, Any]) -> dict[str, Path]:
     """Write ``episodes.csv``, ``summary.csv``, ``table.md``, ``errors.png`` and ``pareto.png`` to ``out``."""
     folder = Path(out)
-    folder.mkdir(parents=True, exist_ok=True)
     summary = summarise(rows)
-    preamble = "".join(f"<!-- {k}: {v} -->\n" for k, v in info.items())
-    paths = {
-        "episodes": write_csv_atomic(folder / "episodes.csv", rows),
-        "summary": write_csv_atomic(folder / "summary.csv", summary),
-        "table": write_text_atomic(folder / "table.md", preamble + markdown_table(summary)),
-    }
+    paths = write_tables(folder, rows, summary, markdown_table(summary), info)
     methods = [s["method"] for s in summary]
     figure = Figure(figsize=(10, 4))
     for i, (name, unit) in enumerate(ERRORS.items()):

@@ -61,20 +61,17 @@ def cramer_rao_std(information: FloatArray, rank_tolerance: float = 1e-9) -> Flo
 def add_information(information: FloatArray, jacobian: FloatArray, inverse_variance: float) -> tuple[FloatArray, float]:
     """``F + J^T J / sigma^2`` for one sample and its ``log det`` (Cholesky; ``-inf`` if not PD).
 
-    The incremental form of :func:`fisher_information` used in the env's reward; compiled with numba.
+    The incremental form of :func:`fisher_information` used in the envs' rewards; compiled with numba (the
+    factorisation is LAPACK's, through numba's ``np.linalg.cholesky``, which raises on a matrix that is not PD).
     """
     updated = information + (jacobian.T @ jacobian) * inverse_variance
-    k = updated.shape[0]
-    chol = np.zeros((k, k))
+    try:
+        chol = np.linalg.cholesky(updated)
+    except Exception:  # numba's LinAlgError: not positive definite
+        return updated, -np.inf
     total = 0.0
-    for j in range(k):
-        diag = updated[j, j] - np.sum(chol[j, :j] ** 2)
-        if diag <= 0.0:
-            return updated, -np.inf
-        chol[j, j] = np.sqrt(diag)
+    for j in range(chol.shape[0]):
         total += np.log(chol[j, j])
-        for i in range(j + 1, k):
-            chol[i, j] = (updated[i, j] - np.sum(chol[i, :j] * chol[j, :j])) / chol[j, j]
     return updated, 2.0 * total
 
 

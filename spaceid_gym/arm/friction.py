@@ -137,22 +137,23 @@ class FrictionModel:
             shape (T, n, k), k = :attr:`n_terms`, in :attr:`columns` order.
         """
         dq = np.asarray(dq_rad_s, dtype=float)
-        columns = []
+        out = np.empty((*dq.shape, self.n_terms))
         s = self.smooth_sign(dq) if {"coulomb", "stribeck", "coulomb_asymmetric"} & set(self.terms) else None
+        i = 0  # the next column
         for term in self.terms:
             if term == "coulomb":
-                columns.append(s)
+                out[..., i] = s
             elif term == "coulomb_asymmetric":
-                columns += [np.maximum(s, 0.0), np.minimum(s, 0.0)]
+                out[..., i] = np.maximum(s, 0.0)
+                out[..., i + 1] = np.minimum(s, 0.0)
             elif term == "viscous":
-                columns.append(dq)
+                out[..., i] = dq
             elif term == "stribeck":
-                columns.append(np.exp(-((dq / self.stribeck_velocity_rad_s) ** 2)) * s)
+                out[..., i] = np.exp(-((dq / self.stribeck_velocity_rad_s) ** 2)) * s
             else:  # offset
-                columns.append(np.ones_like(dq))
-        if not columns:
-            return np.zeros((*dq.shape, 0))
-        return np.stack(columns, axis=-1)
+                out[..., i] = 1.0
+            i += len(TERM_COLUMNS[term])
+        return out
 
     def torque(self, dq_rad_s: FloatArray, coefficients: FloatArray) -> FloatArray:
         """Friction torque, shape (T, n), N m, for coefficients of shape (n, k) (joint j, in :attr:`columns` order)."""

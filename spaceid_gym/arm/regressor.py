@@ -88,6 +88,9 @@ class ArmRegressor:
         inertial_names = [f"link{k + 1}_{field}" for k in range(n) for field in INERTIAL_FIELDS]
         armature_names = [f"joint{j + 1}_armature_kgm2" for j in range(n)] if self.armature else []
         self.parameter_names: tuple[str, ...] = (*inertial_names, *self.friction.parameter_names(n), *armature_names)
+        k = self.friction.n_terms  # joint j's friction coefficients are columns n_inertial + j k .. + k - 1
+        self._friction_rows, self._friction_columns = np.repeat(np.arange(n), k), self.n_inertial + np.arange(n * k)
+        self._joints, self._armature_columns = np.arange(n), self.n_inertial + n * k + np.arange(n)
 
     @property
     def n_joints(self) -> int:
@@ -106,18 +109,27 @@ class ArmRegressor:
         robot included); the friction part is block diagonal (joint j's coefficients act on joint j).
         """
         q, dq, ddq = self._states(q_rad, dq_rad_s, ddq_rad_s2)
-        n_samples, n = q.shape
-        out = np.zeros((n_samples, n, self.n_parameters))
+        out = np.zeros((q.shape[0], q.shape[1], self.n_parameters))
         model, data = self.robot.model, self._data
-        for t in range(n_samples):
+        for t in range(q.shape[0]):
             out[t, :, : self.n_inertial] = pin.computeJointTorqueRegressor(model, data, q[t], dq[t], ddq[t])
-        k = self.friction.n_terms
-        joints = np.arange(n)
-        if k:
-            friction_block = out[:, :, self.n_inertial : self.n_inertial + n * k].reshape(n_samples, n, n, k)
-            friction_block[:, joints, joints, :] = self.friction.features(dq)
+        n_samples = q.shape[0]
+        out[:, self._friction_rows, self._friction_columns] = self.friction.features(dq).reshape(n_samples, -1)
         if self.armature:
-            out[:, joints, self.n_inertial + n * k + joints] = ddq
+            out[:, self._joints, self._armature_columns] = ddq
+        return out
+
+    def state_regressor(self, q_rad: FloatArray, dq_rad_s: FloatArray, ddq_rad_s2: FloatArray) -> FloatArray:
+        """``Y`` at one state, shape (n, p): :meth:`regressor` without its input checks, for states a simulator made.
+
+        Args:
+            q_rad, dq_rad_s, ddq_rad_s2: finite float arrays of shape (n,) each (not checked).
+        """
+        out = np.zeros((self.n_joints, self.n_parameters))
+        out[:, : self.n_inertial] = pin.computeJointTorqueRegressor(self.robot.model, self._data, q_rad, dq_rad_s, ddq_rad_s2)
+        out[self._friction_rows, self._friction_columns] = self.friction.features(dq_rad_s).ravel()
+        if self.armature:
+            out[self._joints, self._armature_columns] = ddq_rad_s2
         return out
 
     def torque(self, q_rad: FloatArray, dq_rad_s: FloatArray, ddq_rad_s2: FloatArray, parameters: FloatArray) -> FloatArray:

@@ -3,7 +3,8 @@
 Plant
 -----
 ``M(q) ddq + C(q, dq) dq + g(q) = u - tau_f(dq)`` with the **true** rigid-body parameters (a
-pinocchio model from :meth:`ArmRegressor.model_with_parameters`, solved by pinocchio's ABA) and
+pinocchio model from :meth:`ArmRegressor.model_with_parameters`, solved by the ABA of
+:mod:`spaceid_gym.arm.chain_dynamics`, equal to pinocchio's to round-off, or by pinocchio's) and
 the true friction ``tau_f`` of :class:`~spaceid_gym.arm.friction.FrictionModel` (Coulomb with the
 model's smooth sign ``tanh(dq / v_eps)``, viscous, optional Stribeck and offset terms). ``u`` is
 the motor torque referred to the joint (gear ratio included): what ``k_t`` times the motor current
@@ -70,6 +71,14 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from spaceid_gym.arm.chain_dynamics import (
+    ChainArrays,
+    SerialChain,
+    chain_arrays,
+    constant_acceleration_period,
+    rk4_period,
+    servo_sample,
+)
 from spaceid_gym.arm.friction import FrictionModel
 from spaceid_gym.arm.joint_log import EFFORT_KINDS, ArmLog
 from spaceid_gym.arm.real_logs import UR5_TORQUE_CONSTANTS_NM_A
@@ -420,6 +429,14 @@ class ArmSimulator:
             self._controller_data = self._controller_model.createData()
             w, zeta = controller.bandwidth_rad_s, controller.damping_ratio
             self._kp, self._kd = w * w, 2.0 * zeta * w
+        # the compiled dynamics of a serial revolute chain (pinocchio's functions otherwise; the same to round-off);
+        # they need the controller's model to differ from the plant's in its inertias only
+        self._compiled: tuple[ChainArrays, ChainArrays] | None = None
+        plant_chain = SerialChain.from_pinocchio(self._model)
+        if controller is not None and plant_chain is not None:
+            controller_chain = SerialChain.from_pinocchio(self._controller_model)
+            if controller_chain is not None and plant_chain.same_geometry(controller_chain):
+                self._compiled = (chain_arrays(plant_chain), chain_arrays(controller_chain))
         self.reset(np.zeros(n))
 
     # ------------------------------------------------------------------ state
@@ -466,13 +483,20 @@ class ArmSimulator:
         return ddq_ref + self._kp * q_ref + self._kd * dq_ref
 
     def advance(self, q_ref: FloatArray, dq_ref: FloatArray, ddq_ref: FloatArray) -> None:
-        """Integrate one sample period (``m`` RK4 steps) tracking the reference given at :meth:`stage_times` (2 m + 1, n)."""
+        """Integrate one sample period (``m`` RK4 steps) tracking the reference given at :meth:`stage_times` (2 m + 1, n).
+
+        ``ddq_ref`` may also be one row (n,), an acceleration constant over the period.
+        """
         m, h = self.steps_per_sample, self.step_s
         if q_ref.shape[0] != 2 * m + 1:
             raise SpaceIdInputError(
                 f"simulator advance: the reference needs {2 * m + 1} rows (stage_times()), got {q_ref.shape[0]}"
             )
         w = self._feedforward(q_ref, dq_ref, ddq_ref)
+        if self._compiled is not None:
+            self._q, self._dq = rk4_period(*self._compiled, self._q, self._dq, w, self._kp, self._kd, h)
+            self._t += m * h
+            return
         aba, model, data, torque = pin.aba, self._model, self._data, self._rigid_body_torque
 
         def acceleration(q: FloatArray, dq: FloatArray, row: int) -> FloatArray:
@@ -495,13 +519,42 @@ class ArmSimulator:
     def sample(self, q_ref: FloatArray, dq_ref: FloatArray, ddq_ref: FloatArray) -> tuple[FloatArray, FloatArray]:
         """At the current state with the reference (n,) each: motor torque ``u`` (n,) N m and acceleration ``ddq`` (n,) rad/s^2."""
         q, dq = self._q, self._dq
+        if self._compiled is not None:
+            rigid, ddq = servo_sample(self._compiled, q, dq, self._feedforward(q_ref, dq_ref, ddq_ref), (self._kp, self._kd))
+            return rigid + self.friction_torque(dq), ddq
         rigid = self._rigid_body_torque(q, dq, self._feedforward(q_ref, dq_ref, ddq_ref)).copy()
         ddq = pin.aba(self._model, self._data, q, dq, rigid).copy()
         return rigid + self.friction_torque(dq), ddq
 
+    def track_constant_acceleration(
+        self, q_ref: FloatArray, dq_ref: FloatArray, ddq_ref: FloatArray, stage_offsets_s: FloatArray
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """:meth:`advance` then :meth:`sample` for a reference of constant acceleration over the period.
+
+        The reference is ``q_r(t + tau) = q_ref + dq_ref tau + ddq_ref tau^2 / 2`` (n,) each, ``tau`` the offsets
+        ``stage_offsets_s`` (2 m + 1,) s of :meth:`stage_times` from the current time. Returns the motor torque ``u``
+        (n,) N m and acceleration ``ddq`` (n,) rad/s^2 at the period's end (as :meth:`sample`), and the reference's
+        angles and rates there (n,) each.
+        """
+        if self._compiled is None:
+            tau = stage_offsets_s[:, None]
+            q_stage, dq_stage = q_ref + dq_ref * tau + 0.5 * ddq_ref * tau**2, dq_ref + ddq_ref * tau
+            self.advance(q_stage, dq_stage, ddq_ref)
+            return (*self.sample(q_stage[-1], dq_stage[-1], ddq_ref), q_stage[-1], dq_stage[-1])
+        m, h = self.steps_per_sample, self.step_s
+        if stage_offsets_s.shape != (2 * m + 1,):
+            raise SpaceIdInputError(
+                f"simulator: the reference needs {2 * m + 1} stage offsets (stage_times()), got {stage_offsets_s.shape}"
+            )
+        self._q, self._dq, rigid, ddq, q_end, dq_end = constant_acceleration_period(
+            *self._compiled, self._q, self._dq, q_ref, dq_ref, ddq_ref, stage_offsets_s, self._kp, self._kd, h
+        )
+        self._t += m * h
+        return rigid + self.friction_torque(self._dq), ddq, q_end, dq_end
+
     def friction_torque(self, dq_rad_s: FloatArray) -> FloatArray:
         """True friction torque for rates of shape (n,) or (T, n), N m, same shape."""
-        return np.sum(self.regressor.friction.features(dq_rad_s) * self.friction_coefficients, axis=-1)
+        return (self.regressor.friction.features(dq_rad_s) * self.friction_coefficients).sum(axis=-1)
 
     # ------------------------------------------------------------------ whole runs
     def run(
