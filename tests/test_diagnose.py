@@ -8,7 +8,8 @@ import types
 import numpy as np
 import pytest
 
-from estimators.attitude_channel import AttitudeChannel, AttitudeNoise
+from estimators.attitude_channel import AttitudeChannel
+from estimators.attitude_noise import AttitudeNoise
 from estimators.diagnostics.compare import compare, model_from_estimate
 from estimators.diagnostics.diagnose import (
     NO_MISSING_EFFECT,

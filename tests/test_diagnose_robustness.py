@@ -16,15 +16,8 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from estimators.attitude_channel import (
-    COUPLING_SPAN_S,
-    AttitudeChannel,
-    AttitudeNoise,
-    _negative_log_likelihood,
-    estimate_gyro_coupling,
-    fit_attitude_noise,
-    truncation_shape,
-)
+from estimators.attitude_channel import COUPLING_SPAN_S, AttitudeChannel, estimate_gyro_coupling, truncation_shape
+from estimators.attitude_noise import AttitudeNoise, _negative_log_likelihood, fit_attitude_noise
 from estimators.diagnostics.diagnose import NO_MISSING_EFFECT, attitude_gyro_dependence, diagnose, low_frequency_p_value
 from estimators.diagnostics.suite import DIAGNOSTIC_EXCITATION
 from estimators.diagnostics.workflow import true_parameters

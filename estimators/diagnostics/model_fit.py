@@ -15,7 +15,8 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.stats import chi2, norm
 
-from estimators.attitude_channel import AttitudeChannel, AttitudeNoise, GyroCoupling, estimate_gyro_coupling
+from estimators.attitude_channel import AttitudeChannel, GyroCoupling, estimate_gyro_coupling
+from estimators.attitude_noise import AttitudeNoise
 from estimators.base import Estimator
 from estimators.estimate import Estimate
 from estimators.least_squares import LevenbergMarquardt

@@ -15,7 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from estimators.attitude_channel import AttitudeChannel, AttitudeNoise, GyroCoupling
+from estimators.attitude_channel import AttitudeChannel, GyroCoupling
+from estimators.attitude_noise import AttitudeNoise
 from estimators.base import Estimator
 from estimators.diagnostics.compare import Comparison, compare
 from estimators.diagnostics.diagnose import Diagnosis, candidate_model, diagnose

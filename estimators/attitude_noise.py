@@ -1,0 +1,209 @@
+"""The attitude residual's error model: the attitude source's white error and the model's own wander.
+
+Per axis of the first sample's base frame, the attitude channel's residual (:mod:`estimators.attitude_channel`) is
+modelled as
+
+* the attitude source's white error ``w_k`` (std ``white_std_rad``): a star tracker's noise;
+* the model's own accumulated error ``s_k``, whose steps ``a_k = s_k - s_{k-1}`` are a first-order
+  autoregression, ``a_k = phi a_{k-1} + nu_k`` (``walk_std_rad``: std of ``nu``; ``walk_correlation``: ``phi``
+  in ``[0, 1)``). ``phi = 0`` is a random walk (encoder and rate noise through the nonlinear momentum map, a
+  filtered attitude's drift with its gyro); ``phi`` near 1 a smooth wander (the midpoint rule against the
+  true motion between samples, another simulator's integrator).
+
+Then ``u_k = d_k - phi d_{k-1} = w_k - (1 + phi) w_{k-1} + phi w_{k-2} + nu_k`` (``k >= 2``) of the residual's
+differences ``d`` is a moving average of order 2: its covariance is banded, and :meth:`AttitudeNoise.whiten` whitens
+``u`` with that covariance's banded Cholesky factor, a chi-square exact for this model. The three numbers per axis
+are fitted by maximum likelihood (:func:`fit_attitude_noise`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numba import njit
+from scipy.linalg import cholesky_banded
+from scipy.optimize import minimize
+
+from spaceid_gym.arrays import FloatArray
+from spaceid_gym.errors import SpaceIdInputError
+
+#: the smallest std (rad) either part of :class:`AttitudeNoise` may have: keeps the whitening finite on a
+#: noise-free log (the midpoint rule's own error there is ~1e-9 rad per step)
+MIN_STD_RAD = 1e-10
+
+#: the range of the log-stds the error model's fit explores (:func:`fit_attitude_noise`): MIN_STD_RAD to 1 rad
+LOG_STD_LIMITS = (math.log(MIN_STD_RAD), 0.0)
+
+#: the largest step correlation ``phi`` fitted (:func:`fit_attitude_noise`)
+MAX_CORRELATION = 0.999
+
+
+@dataclass(frozen=True)
+class AttitudeNoise:
+    """The attitude residual's error model, per axis of the first sample's base frame (see the module docstring).
+
+    Attributes:
+        white_std_rad: std of the attitude source's white error (3,), rad.
+        walk_std_rad: std of the innovation ``nu`` of the model's wander steps (3,), rad.
+        walk_correlation: ``phi`` (3,), in ``[0, 1)``: the correlation of successive wander steps (0: a random walk).
+    """
+
+    white_std_rad: tuple[float, float, float]
+    walk_std_rad: tuple[float, float, float]
+    walk_correlation: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        for label in ("white_std_rad", "walk_std_rad", "walk_correlation"):
+            value = np.asarray(getattr(self, label), dtype=float)
+            if value.shape != (3,) or not np.all(np.isfinite(value)) or np.any(value < 0.0):
+                raise SpaceIdInputError(f"attitude noise: {label} expected 3 finite numbers >= 0, got {value!r}")
+        if np.any(np.asarray(self.walk_correlation) >= 1.0):
+            raise SpaceIdInputError(f"attitude noise: walk_correlation expected values in [0, 1), got {self.walk_correlation!r}")
+
+    @classmethod
+    def white(cls, std_rad: float) -> AttitudeNoise:
+        """A white attitude error of ``std_rad`` per axis and no wander (a star tracker and an exact model)."""
+        return cls((std_rad,) * 3, (0.0,) * 3)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> AttitudeNoise:
+        """The inverse of :meth:`to_dict`."""
+        return cls(*(tuple(float(v) for v in data[k]) for k in ("white_std_rad", "walk_std_rad", "walk_correlation")))  # type: ignore[arg-type]
+
+    def to_dict(self) -> dict[str, list[float]]:
+        """JSON-able: ``white_std_rad``, ``walk_std_rad`` and ``walk_correlation``, three each."""
+        return {k: [float(v) for v in getattr(self, k)] for k in ("white_std_rad", "walk_std_rad", "walk_correlation")}
+
+    @property
+    def step_std_rad(self) -> FloatArray:
+        """The std of the wander's steps ``a`` (3,), rad: ``walk_std_rad / sqrt(1 - phi^2)``."""
+        return np.asarray(self.walk_std_rad) / np.sqrt(1.0 - np.asarray(self.walk_correlation) ** 2)
+
+    def factors(self, n_steps: int) -> list[FloatArray]:
+        """Per axis, the lower banded Cholesky factor (3, n_steps - 1) of the filtered differences' covariance."""
+        return [
+            _filtered_factor(white, walk, phi, n_steps - 1)
+            for white, walk, phi in zip(self.white_std_rad, self.walk_std_rad, self.walk_correlation, strict=True)
+        ]
+
+    def log_det(self, n_steps: int) -> float:
+        """``log det`` of the covariance of the filtered differences of a log of ``n_steps`` samples (all three axes):
+        the term that, added to the chi-square, makes ``-2 log L`` comparable across error models."""
+        return float(sum(2.0 * np.sum(np.log(factor[0])) for factor in self.factors(n_steps)))
+
+    def whiten(self, differences: FloatArray, factors: list[FloatArray] | None = None) -> FloatArray:
+        """Differenced residuals (T-1, 3) or their Jacobian (T-1, 3, k) -> whitened (T-2, 3[, k]): ``u = d_k - phi
+        d_{k-1}``, then ``L^-1 u`` per axis, unit variance and independent under the model."""
+        factors = self.factors(differences.shape[0]) if factors is None else factors
+        out = np.empty((differences.shape[0] - 1, *differences.shape[1:]))
+        for axis, (phi, factor) in enumerate(zip(self.walk_correlation, factors, strict=True)):
+            d = differences[:, axis]
+            u = d[1:] - phi * d[:-1]
+            out[:, axis] = _lower_banded_solve(factor, np.ascontiguousarray(u.reshape(len(u), -1))).reshape(u.shape)
+        return out
+
+
+@njit(cache=True)
+def _lower_banded_solve(factor: FloatArray, rhs: FloatArray) -> FloatArray:
+    """``L^-1 rhs`` (n, m) by forward substitution, for ``L`` a lower factor of bandwidth 2 in LAPACK's band storage
+    (3, n) (row ``r`` holds ``L[j + r, j]``, as :func:`_filtered_factor` gives it) and ``rhs`` (n, m)."""
+    n, m = rhs.shape
+    out = np.empty((n, m))
+    for j in range(n):
+        for c in range(m):
+            value = rhs[j, c]
+            if j >= 2:
+                value -= factor[2, j - 2] * out[j - 2, c]
+            if j >= 1:
+                value -= factor[1, j - 1] * out[j - 1, c]
+            out[j, c] = value / factor[0, j]
+    return out
+
+
+def _filtered_factor(white_std: float, walk_std: float, phi: float, n: int) -> FloatArray:
+    """Lower banded Cholesky factor (3, n) of the MA(2) covariance of ``u`` (see the module docstring)."""
+    sw2, snu2 = max(white_std, MIN_STD_RAD) ** 2, max(walk_std, MIN_STD_RAD) ** 2
+    bands = np.zeros((3, n))
+    bands[0] = sw2 * (1.0 + (1.0 + phi) ** 2 + phi * phi) + snu2
+    bands[1, :-1] = -sw2 * (1.0 + phi) ** 2
+    bands[2, :-2] = sw2 * phi
+    return cholesky_banded(bands, lower=True, check_finite=False)
+
+
+def _negative_log_likelihood(x: FloatArray, differences: FloatArray) -> float:
+    """``-log L`` (up to a constant) of one axis's differences (n,) for ``x = [log sw, log snu, logit phi]``."""
+    # outside these the likelihood is flat (a std below MIN_STD_RAD or above 1 rad, phi at 0 or its cap), and exp
+    # would overflow where the simplex wanders
+    log_sw, log_snu = (min(max(v, LOG_STD_LIMITS[0]), LOG_STD_LIMITS[1]) for v in x[:2])
+    phi = MAX_CORRELATION / (1.0 + math.exp(-min(max(x[2], -50.0), 50.0)))
+    sw2, snu2 = max(math.exp(log_sw), MIN_STD_RAD) ** 2, max(math.exp(log_snu), MIN_STD_RAD) ** 2
+    return _whitened_log_likelihood(sw2, snu2, phi, differences)
+
+
+@njit(cache=True)
+def _whitened_log_likelihood(sw2: float, snu2: float, phi: float, d: FloatArray) -> float:
+    """``sum log L_jj + |L^-1 u|^2 / 2`` for ``u = d_k - phi d_{k-1}`` and ``L`` the Cholesky factor of the covariance of
+    :func:`_filtered_factor`, in one pass: each row of ``L`` (three numbers, the covariance is banded Toeplitz) and
+    the forward substitution as they come, without storing either."""
+    c0 = sw2 * (1.0 + (1.0 + phi) ** 2 + phi * phi) + snu2
+    c1 = -sw2 * (1.0 + phi) ** 2
+    c2 = sw2 * phi
+    log_det, chi2 = 0.0, 0.0
+    diag1, diag2, sub1 = 1.0, 1.0, 0.0  # L[j-1, j-1], L[j-2, j-2], L[j-1, j-2]
+    w1, w2 = 0.0, 0.0  # the whitened values of rows j-1 and j-2
+    for j in range(len(d) - 1):
+        far = c2 / diag2 if j >= 2 else 0.0  # L[j, j-2]
+        near = (c1 - far * sub1) / diag1 if j >= 1 else 0.0  # L[j, j-1]
+        diag = math.sqrt(c0 - far * far - near * near)
+        w = (d[j + 1] - phi * d[j] - far * w2 - near * w1) / diag
+        log_det += math.log(diag)
+        chi2 += w * w
+        diag2, diag1, sub1, w2, w1 = diag1, diag, near, w1, w
+    return log_det + 0.5 * chi2
+
+
+#: the error model's Nelder-Mead stops when the simplex spans less than ``xatol`` in the log-stds and the logit of
+#: ``phi`` and less than ``fatol`` in ``-log L`` (on three logs, clean orbit7 with a star tracker, a fused and an
+#: exact attitude, the maximum of ``log L`` agreed with 1e-4 and 1e-6 to 1e-6, in half the evaluations)
+NELDER_MEAD_TOLERANCES = {"xatol": 1e-3, "fatol": 1e-3}
+
+
+def fit_attitude_noise(differences: FloatArray, start: AttitudeNoise | None = None) -> AttitudeNoise:
+    """Maximum-likelihood :class:`AttitudeNoise` of differenced attitude residuals (T-1, 3), rad, axis by axis.
+
+    Starts from the moments of a white error plus a random walk (lag-1 autocovariance ``-sw^2``, variance
+    ``2 sw^2 + snu^2``) with ``phi`` = 0.5, and from ``phi`` = 0.05 and 0.95, refining all three numbers with
+    Nelder-Mead (a smooth three-dimensional likelihood); the best of the three. ``start``: an error model fitted
+    to a nearby residual (another model's on the same log), tried as a fourth start."""
+    white, walk, correlation = [], [], []
+    for axis, d in enumerate(np.asarray(differences, dtype=float).T):
+        variance = float(d @ d) / len(d)
+        lag1 = float(d[1:] @ d[:-1]) / len(d)
+        sw2 = min(max(-lag1, 0.01 * variance), 0.49 * variance)
+        snu2 = max(variance - 2.0 * sw2, 0.01 * variance)
+        logs = 0.5 * np.log(np.maximum([sw2, snu2], MIN_STD_RAD**2))
+        starts = [np.array([*logs, _logit(phi)]) for phi in (0.05, 0.5, 0.95)]
+        if start is not None:
+            near = (start.white_std_rad[axis], start.walk_std_rad[axis])
+            starts.append(np.array([*np.log(np.maximum(near, MIN_STD_RAD)), _logit(start.walk_correlation[axis])]))
+        best = None
+        for x0 in starts:
+            result = minimize(_negative_log_likelihood, x0, args=(d,), method="Nelder-Mead", options=NELDER_MEAD_TOLERANCES)
+            if best is None or result.fun < best.fun:
+                best = result
+        assert best is not None
+        # the point as the likelihood saw it (clamped to the explored range, where the simplex may have wandered)
+        w, r = (math.exp(min(max(v, LOG_STD_LIMITS[0]), LOG_STD_LIMITS[1])) for v in best.x[:2])
+        white.append(w if w > MIN_STD_RAD else 0.0)
+        walk.append(r if r > MIN_STD_RAD else 0.0)
+        correlation.append(MAX_CORRELATION / (1.0 + math.exp(-min(max(best.x[2], -50.0), 50.0))))
+    return AttitudeNoise(tuple(white), tuple(walk), tuple(correlation))  # type: ignore[arg-type]
+
+
+def _logit(phi: float) -> float:
+    """The Nelder-Mead coordinate of a step correlation ``phi`` in ``(0, MAX_CORRELATION)``."""
+    phi = min(max(phi, 1e-6), MAX_CORRELATION * (1.0 - 1e-9))
+    return math.log(phi / (MAX_CORRELATION - phi))
