@@ -10,16 +10,18 @@ Then ``sdp`` once, and ``improved-abc[consistent=true,polish=true]`` with colony
 budget of ``--budgets`` (``default`` is the estimator's own: 5000 cycles, 200 000 evaluations).
 
 With ``--real FOLDER`` (the real UR5 logs, ``shared/data/ur5-real``): every fold of leave one movement out over the 7
-undisturbed movements instead, the model with Coulomb + viscous friction (``--armature``: and a rotor inertia).
+undisturbed movements instead, the model with ``--friction`` (default Coulomb + viscous; the recommended real model:
+``coulomb_asymmetric,viscous``) and, with ``--armature``, a rotor inertia per joint; then also a table per fold (the
+fraction of colony seeds within 1 % of the fold's sdp cost, the largest excess, the time per fit of each).
 
 Excess: ``(cost_colony - cost_sdp) / cost_sdp`` on the same training cost; slightly negative values are the sdp's
 regulariser trade (:mod:`estimators.arm.sdp`). Held-out: residual RMS over the processed noise floor (1 = the floor) on
 simulated data, the relative error over all joints (%) on real data.
 
 Run: ``.venv/bin/python benchmarks/ur5_colony_vs_sdp.py --datasets 3 --seeds 20 --budgets 20000,default`` and
-``.venv/bin/python benchmarks/ur5_colony_vs_sdp.py --real ../shared/data/ur5-real --armature --seeds 5 --budgets
-20000,100000`` (the figures in the report of issue 21; about 2 s per colony fit at 20 000 evaluations on a shared
-2-core machine).
+``.venv/bin/python benchmarks/ur5_colony_vs_sdp.py --real ur5-real/ --armature --seeds 20 --budgets default`` (add
+``--friction coulomb_asymmetric,viscous`` for the recommended real model); the figures in ``docs/results.md``. Each
+fit's line is printed as soon as it is done.
 """
 
 from __future__ import annotations
@@ -43,6 +45,8 @@ from estimators.arm.model import ArmIdentificationModel, IdentificationRows
 from estimators.evaluation import estimator_from_spec
 from spaceid_gym.arm.datasets import simulate_train_and_held_out
 from spaceid_gym.arm.robot import load_arm
+from spaceid_gym.arm_cli import parse_friction
+from spaceid_gym.errors import SpaceIdInputError
 
 FRICTION = ("coulomb", "viscous")
 #: the real UR5 movements without a person pushing the arm
@@ -77,13 +81,10 @@ def compare(
     problem = joint_weighted(model.problem(train_rows))
     sdp = fit(model, train_rows, estimator_from_spec("sdp"))
     sdp_cost = float(problem.cost(sdp.theta, count=False)[0])
-    fits = [("sdp", None, sdp)] + [
-        (f"colony {budget}", seed, fit(model, train_rows, estimator_from_spec(colony_spec(budget), seed=seed)))
-        for budget in budgets
-        for seed in range(seeds)
-    ]
+    unit = "x noise" if floor is not None else "%"
     rows: list[dict[str, object]] = []
-    for label, seed, estimate in fits:
+    for label, seed, spec in [("sdp", None, "")] + [(f"colony {b}", s, colony_spec(b)) for b in budgets for s in range(seeds)]:
+        estimate = sdp if seed is None else fit(model, train_rows, estimator_from_spec(spec, seed=seed))
         error = prediction_error(model, estimate.theta, held_rows, floor)
         cost = float(problem.cost(estimate.theta, count=False)[0])
         rows.append(
@@ -98,11 +99,20 @@ def compare(
                 "wall_s": estimate.wall_time_s,
             }
         )
+        print(row_line(rows[-1], unit), flush=True)
     return rows
 
 
+def row_line(row: dict[str, object], unit: str) -> str:
+    """One fit's line: fold or dataset, estimator, seed, excess, held-out error, consistency, time."""
+    return (
+        f"{row['dataset']} {row['estimator']:<16} seed {row['seed']}: excess {100 * float(str(row['excess'])):+.5f} %, "
+        f"held-out {float(str(row['held_out'])):.3f} {unit}, consistent {row['consistent']}, {float(str(row['wall_s'])):.2f} s"
+    )
+
+
 def run_dataset(dataset: int, duration_s: float, seeds: int, budgets: list[str]) -> list[dict[str, object]]:
-    """One simulated dataset (module docstring): :func:`compare` on it."""
+    """One simulated dataset (module docstring, Coulomb + viscous friction): :func:`compare` on it."""
     robot = load_arm("ur5")
     model = ArmIdentificationModel.build(robot, FRICTION)
     with tempfile.TemporaryDirectory() as folder:
@@ -116,9 +126,10 @@ def run_dataset(dataset: int, duration_s: float, seeds: int, budgets: list[str])
     return compare(model, train_rows, held_rows, floor, seeds, budgets, f"sim {dataset}")
 
 
-def run_real(folder: str, armature: bool, seeds: int, budgets: list[str]) -> list[dict[str, object]]:
-    """Real UR5 logs: every fold of leave one movement out over the undisturbed movements (:func:`compare` per fold)."""
-    model = ArmIdentificationModel.build(load_arm("ur5"), FRICTION, armature)
+def run_real(folder: str, friction: tuple[str, ...], armature: bool, seeds: int, budgets: list[str]) -> list[dict[str, object]]:
+    """Real UR5 logs: every fold of leave one movement out over the undisturbed movements (:func:`compare` per fold),
+    the model with the ``friction`` terms (and ``armature``)."""
+    model = ArmIdentificationModel.build(load_arm("ur5"), friction, armature)
     rows = Preparation().all_rows(model, load_movements(folder, UNDISTURBED))
     return [
         row
@@ -149,6 +160,29 @@ def summary(rows: list[dict[str, object]], held_unit: str) -> str:
     return "\n".join(lines)
 
 
+def per_fold(rows: list[dict[str, object]]) -> str:
+    """Per fold and colony budget: seeds within 1 % of the fold's sdp cost, the largest excess, the held-out error
+    of sdp and the colonies' worst, the time per fit of sdp and the colonies' mean (markdown)."""
+    lines = [
+        "| fold (held out) | budget | within 1 % of sdp | largest excess % | held-out % sdp, colony worst | s/fit sdp | s/fit colony (mean, max) |",
+        "|---|---|---:|---:|---|---:|---|",
+    ]
+    folds = list(dict.fromkeys(str(r["dataset"]) for r in rows))
+    budgets = list(dict.fromkeys(str(r["estimator"]) for r in rows if r["seed"] is not None))
+    for fold in folds:
+        sdp = next(r for r in rows if r["dataset"] == fold and r["seed"] is None)
+        for budget in budgets:
+            group = [r for r in rows if r["dataset"] == fold and r["estimator"] == budget]
+            excess = 100.0 * np.array([float(str(r["excess"])) for r in group])
+            wall = np.array([float(str(r["wall_s"])) for r in group])
+            held = max(float(str(r["held_out"])) for r in group)
+            lines.append(
+                f"| {fold} | {budget.removeprefix('colony ')} | {int(np.sum(excess <= 1.0))}/{len(group)} | {excess.max():+.5f} | "
+                f"{float(str(sdp['held_out'])):.2f}, {held:.2f} | {float(str(sdp['wall_s'])):.2f} | {wall.mean():.1f}, {wall.max():.1f} |"
+            )
+    return "\n".join(lines)
+
+
 def main() -> None:
     """Print one line per fit, then per budget the distribution of the excess (markdown)."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -158,22 +192,30 @@ def main() -> None:
     parser.add_argument("--budgets", default="20000,default", help="comma-separated colony budgets (default 20000,default)")
     parser.add_argument("--real", default=None, help="folder of the real UR5 movements: their folds instead of simulated data")
     parser.add_argument("--armature", action="store_true", help="with --real: the model with a rotor inertia per joint")
+    parser.add_argument(
+        "--friction",
+        default=",".join(FRICTION),
+        help="with --real: the model's friction terms, comma-separated (default coulomb,viscous)",
+    )
     args = parser.parse_args()
     budgets = [b.strip() for b in args.budgets.split(",") if b.strip()]
+    try:
+        friction = parse_friction(args.friction)
+    except SpaceIdInputError as exc:
+        parser.error(str(exc))
     start = time.perf_counter()
     if args.real is None:
         rows = [row for d in range(3, 3 + 2 * args.datasets, 2) for row in run_dataset(d, args.duration, args.seeds, budgets)]
         unit, what = "x noise", f"{args.datasets} simulated dataset(s)"
     else:
-        rows = run_real(args.real, args.armature, args.seeds, budgets)
-        unit, what = "%", f"{len(UNDISTURBED)} real folds" + (" (armature)" if args.armature else "")
-    for r in rows:
-        print(
-            f"{r['dataset']} {r['estimator']:<16} seed {r['seed']}: excess {100 * float(str(r['excess'])):+.5f} %, "
-            f"held-out {float(str(r['held_out'])):.3f} {unit}, consistent {r['consistent']}, {float(str(r['wall_s'])):.2f} s"
-        )
+        rows = run_real(args.real, friction, args.armature, args.seeds, budgets)
+        model = ",".join(friction) + (" + armature" if args.armature else "")
+        unit, what = "%", f"{len(UNDISTURBED)} real folds ({model})"
     print(f"\n{what} x {args.seeds} colony seeds, {time.perf_counter() - start:.0f} s\n")
     print(summary(rows, unit))
+    if args.real is not None:
+        print()
+        print(per_fold(rows))
 
 
 if __name__ == "__main__":
