@@ -100,6 +100,16 @@ class GyroCoupling:
 COUPLING_SPAN_S = 1.0
 
 
+def coupling_lags(dt_s: float) -> int:
+    """The lags :func:`estimate_gyro_coupling` fits at sample period ``dt_s`` (s): -1 .. ``COUPLING_SPAN_S / dt_s``."""
+    return math.ceil(COUPLING_SPAN_S / dt_s) + 2
+
+
+def min_coupling_samples(dt_s: float) -> int:
+    """The fewest samples of a log whose :class:`GyroCoupling` can be fitted: four per coefficient."""
+    return 4 * coupling_lags(dt_s) + 2
+
+
 def estimate_gyro_coupling(differences: FloatArray, gyro_steps: FloatArray, dt_s: float) -> GyroCoupling:
     """:class:`GyroCoupling` of attitude residual steps ``differences`` (n, 3) on gyro residual steps ``gyro_steps``
     (n, 3), both rad, from a fit of the model (the baseline's), lags -1 .. ``COUPLING_SPAN_S / dt_s``, their sum held
@@ -110,12 +120,14 @@ def estimate_gyro_coupling(differences: FloatArray, gyro_steps: FloatArray, dt_s
     Least squares per axis on the first differences of both: a missing effect's slow signature, in both channels
     at that fit, must not be taken for the filter's response (the dependence test,
     :func:`~estimators.diagnostics.model_fit.attitude_gyro_dependence`, differences for the same reason)."""
-    n_lags = math.ceil(COUPLING_SPAN_S / dt_s) + 2
+    n_lags = coupling_lags(dt_s)
     a = np.diff(np.asarray(differences, dtype=float), axis=0)
     g = np.diff(np.asarray(gyro_steps, dtype=float), axis=0)
     n = len(a)
-    if n < 4 * n_lags:
-        raise SpaceIdInputError(f"gyro coupling: {n + 2} samples are too few for {n_lags} lags (need {4 * n_lags + 2})")
+    if n + 2 < min_coupling_samples(dt_s):
+        raise SpaceIdInputError(
+            f"gyro coupling: {n + 2} samples are too few for {n_lags} lags (need {min_coupling_samples(dt_s)})"
+        )
     coefficients = np.empty((n_lags, 3))
     for axis in range(3):
         design = np.zeros((n, n_lags))

@@ -16,7 +16,13 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from estimators.attitude_channel import COUPLING_SPAN_S, AttitudeChannel, estimate_gyro_coupling, truncation_shape
+from estimators.attitude_channel import (
+    COUPLING_SPAN_S,
+    AttitudeChannel,
+    estimate_gyro_coupling,
+    min_coupling_samples,
+    truncation_shape,
+)
 from estimators.attitude_noise import AttitudeNoise, _negative_log_likelihood, fit_attitude_noise
 from estimators.diagnostics.diagnose import NO_MISSING_EFFECT, attitude_gyro_dependence, diagnose, low_frequency_p_value
 from estimators.diagnostics.suite import DIAGNOSTIC_EXCITATION
@@ -297,3 +303,13 @@ def test_the_coupled_channel_jacobian_matches_finite_differences() -> None:
         np.testing.assert_allclose(jac[:, :, k], numeric, rtol=1e-5, atol=1e-9 * np.abs(jac[:, :, k]).max() + 1e-20)
     noise = channel.estimate_noise(theta)
     assert channel.chi2s(np.stack([theta, theta]), noise) == pytest.approx([channel.chi2(theta, noise)] * 2, rel=1e-12)
+
+
+def test_a_fused_attitude_too_short_for_its_coupling_leaves_the_verdict_to_the_gyro(paper6: Robot) -> None:
+    """A 3 s fused log at 50 Hz (150 samples) is too short to fit the attitude's response to the gyro (52 lags need
+    210): the diagnosis says so and rests on the gyro alone, instead of failing."""
+    log = _log(paper6, None, "fused", duration_s=3.0)
+    assert log.n_samples < min_coupling_samples(0.02)
+    d = diagnose(IdentificationModel(paper6, "fuel"), log)
+    assert d.attitude_rejected and d.weights is None
+    assert "too short to fit its response to the gyro" in d.reason

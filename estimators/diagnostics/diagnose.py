@@ -219,8 +219,9 @@ def diagnose(
     independence = independent_attitude_channel(model, log, baseline.theta, alpha)
     channel = independence.channel
     diagnosis = _diagnose(model, log, names, baseline, alpha, channel)
-    if independence.coupled is not None:
+    if independence.coupled is not None or independence.too_short:
         diagnosis.reason = f"{independence.describe()}; {diagnosis.reason}"
+        diagnosis.attitude_rejected = independence.too_short
     if channel is not None and not diagnosis.attitude_consistent:
         p_best = max(f.attitude_white_p for f in [diagnosis.baseline, *diagnosis.candidates])
         diagnosis = _diagnose(model, log, names, baseline, alpha, None)

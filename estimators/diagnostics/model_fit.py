@@ -15,7 +15,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.stats import chi2, norm
 
-from estimators.attitude_channel import AttitudeChannel, GyroCoupling, estimate_gyro_coupling
+from estimators.attitude_channel import AttitudeChannel, GyroCoupling, estimate_gyro_coupling, min_coupling_samples
 from estimators.attitude_noise import AttitudeNoise
 from estimators.base import Estimator
 from estimators.estimate import Estimate
@@ -365,9 +365,16 @@ class AttitudeIndependence:
     channel: AttitudeChannel | None
     raw: tuple[float, float]
     coupled: tuple[float, float] | None = None
+    too_short: bool = False  # dependent, but the log is too short to fit the coupling: the gyro alone
 
     def describe(self) -> str:
         """A sentence for the diagnosis's reason ("" when the attitude was independent of the gyro)."""
+        if self.too_short:
+            return (
+                f"the attitude's steps follow the gyro's own noise (correlation {self.raw[0]:+.2f} of their high-frequency "
+                f"parts, p = {self.raw[1]:.2g}): an attitude estimate fused with this gyro, and the log is too short to fit "
+                f"its response to the gyro, so the verdict rests on the gyro alone"
+            )
         if self.coupled is None:
             return ""
         return (
@@ -397,6 +404,8 @@ def independent_attitude_channel(
     raw = attitude_gyro_dependence(channel.differences(theta), gyro_residual, dt_s)
     if raw[1] >= alpha:
         return AttitudeIndependence(channel, raw)
+    if log.n_samples < min_coupling_samples(float(np.median(dt_s))):
+        return AttitudeIndependence(None, raw, too_short=True)
     gyro_steps = channel.gyro_steps(channel.problem.rates(np.atleast_2d(theta), count=False)[1])[0]
     coupling = estimate_gyro_coupling(channel.differences(theta), gyro_steps, float(np.median(dt_s)))
     coupled = AttitudeChannel.of(model, log, coupling)
