@@ -401,13 +401,14 @@ def independent_attitude_channel(
         return AttitudeIndependence(None, (0.0, 1.0))
     gyro_residual = model.problem(log).residuals(theta, count=False).reshape(-1, 3)
     dt_s = np.diff(log.t_s)
-    raw = attitude_gyro_dependence(channel.differences(theta), gyro_residual, dt_s)
+    differences = channel.differences(theta)
+    raw = attitude_gyro_dependence(differences, gyro_residual, dt_s)
     if raw[1] >= alpha:
         return AttitudeIndependence(channel, raw)
     if log.n_samples < min_coupling_samples(float(np.median(dt_s))):
         return AttitudeIndependence(None, raw, too_short=True)
     gyro_steps = channel.gyro_steps(channel.problem.rates(np.atleast_2d(theta), count=False)[1])[0]
-    coupling = estimate_gyro_coupling(channel.differences(theta), gyro_steps, float(np.median(dt_s)))
+    coupling = estimate_gyro_coupling(differences, gyro_steps, float(np.median(dt_s)))
     coupled = AttitudeChannel.of(model, log, coupling)
     assert coupled is not None
     return AttitudeIndependence(coupled, raw, attitude_gyro_dependence(coupled.differences(theta), gyro_residual, dt_s))

@@ -19,13 +19,14 @@ from estimators.diagnostics.residuals.correlation import (
 from estimators.diagnostics.residuals.noise import fit_percent, noise_floor_dof, noise_floor_std
 from estimators.diagnostics.residuals.segments import Segment, failing_segments
 from estimators.diagnostics.residuals.spectrum import SpectralPeak, dominant_frequencies
+from estimators.models.effect_models import DELAY_BAND_HZ
 from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.files import jsonable
 
 #: cutoff (Hz) of the low-pass on the cross-correlation's inputs: the band of the motions and of the effects'
-#: signatures (the delay term's band, :data:`~estimators.models.effect_models.DELAY_BAND_HZ`, starts there too)
-INPUT_BAND_HZ = 10.0
+#: signatures, where the delay term's band starts too (one number for both)
+INPUT_BAND_HZ = DELAY_BAND_HZ[0]
 #: the cutoff is at most this fraction of the sample rate
 INPUT_BAND_FRACTION_OF_RATE = 0.2
 
