@@ -407,7 +407,7 @@ def independent_attitude_channel(
         return AttitudeIndependence(channel, raw)
     if log.n_samples < min_coupling_samples(float(np.median(dt_s))):
         return AttitudeIndependence(None, raw, too_short=True)
-    gyro_steps = channel.gyro_steps(channel.problem.rates(np.atleast_2d(theta), count=False)[1])[0]
+    gyro_steps = channel.gyro_steps(channel.problem.base_rate(np.atleast_2d(theta), count=False))[0]
     coupling = estimate_gyro_coupling(differences, gyro_steps, float(np.median(dt_s)))
     coupled = AttitudeChannel.of(model, log, coupling)
     assert coupled is not None
