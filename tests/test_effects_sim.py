@@ -43,7 +43,8 @@ from spaceid_gym.physics.fuel import base_after_fuel
 from spaceid_gym.physics.inertia import RigidBodyInertia, skew
 from spaceid_gym.physics.momentum import base_rate_from_joint_motion
 from spaceid_gym.robots import Robot
-from spaceid_gym.sim.simulator import FreeFloatingSimulator, FreeFloatingState
+from spaceid_gym.sim.simulator import FreeFloatingSimulator
+from spaceid_gym.sim.state import FreeFloatingState
 
 DT = 0.02
 TANK = np.array([0.1, 0.05, -0.1])  # quick3 tank position bf (m, from the full-tank CoM)

@@ -25,7 +25,8 @@ from spaceid_gym.physics.momentum import base_parameter_directions, twist_parame
 from spaceid_gym.robots import Robot, load_robot
 from spaceid_gym.sim.recorder import LogRecorder
 from spaceid_gym.sim.sensors import Measurement, SensorModel
-from spaceid_gym.sim.simulator import FreeFloatingSimulator, FreeFloatingState
+from spaceid_gym.sim.simulator import FreeFloatingSimulator
+from spaceid_gym.sim.state import FreeFloatingState
 
 #: the default identification window: 3000 steps, 60 s at 50 Hz (the registered ``max_episode_steps``)
 WINDOW_STEPS = 3000
