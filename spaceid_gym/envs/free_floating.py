@@ -12,7 +12,8 @@ from gymnasium import spaces
 from numpy.typing import NDArray
 
 from spaceid_gym.arrays import FloatArray
-from spaceid_gym.effects import HiddenEffects, parse_effect_spec, parse_hidden_effects
+from spaceid_gym.effects.settings import HiddenEffects
+from spaceid_gym.effects.spec_strings import parse_effect_spec, parse_hidden_effects
 from spaceid_gym.envs.actions import checked_action
 from spaceid_gym.envs.render import RobotRenderer, base_half_extents_from_inertia
 from spaceid_gym.errors import SpaceIdInputError

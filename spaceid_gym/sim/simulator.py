@@ -54,7 +54,7 @@ import numpy as np
 import pinocchio as pin
 
 from spaceid_gym.arrays import FloatArray
-from spaceid_gym.effects import HiddenEffects
+from spaceid_gym.effects.settings import HiddenEffects
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.physics.inertia import RigidBodyInertia
 from spaceid_gym.robots.robot import Robot
