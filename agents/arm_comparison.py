@@ -39,7 +39,7 @@ from agents.policy import HELD_OUT_FIRST_SEED
 from estimators.arm.linear_ls import weighted_lstsq
 from estimators.arm.linear_problem import LinearIdentificationProblem
 from spaceid_gym.arm.excitation_design import ExcitationResult, optimise_excitation
-from spaceid_gym.arm.torque_simulator import ArmSensorModel
+from spaceid_gym.arm.joint_sensors import ArmSensorModel
 from spaceid_gym.envs.manipulator import ManipulatorIDEnv
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.excitation import FourierExcitation

@@ -21,16 +21,11 @@ bounds as in :mod:`estimators.swarm`), each switchable for an ablation:
    every particle sees the whole record, and one generation costs ``N / K`` whole-log evaluations:
    the swarm can be ``K`` times larger for the same budget. Off: every particle on the whole log.
 
-**Comparable costs across subsets.** The raw cost on subset ``s`` is
-``c_s(x) = |f_s(x) - f_s(x*)|^2 / n_s - 2 e_s.(f_s(x) - f_s(x*)) / n_s + |e_s|^2 / n_s`` (``e`` the noise,
-``n_s`` the subset's residual count). The last term, the subset's noise energy, differs between
-subsets by ``~sqrt(2 / n_s)`` relative (a few %), while the differences that matter near the
-optimum are ~1e-4 relative: ranking raw costs ranks particles by the subset they drew. So every
+**Comparable costs across subsets** (:mod:`estimators.subset_costs`, which says why). Every
 comparison (personal bests, neighbourhood bests, resets) uses the **excess cost**
-``c_s(x) - c_s(x_ref)`` over a reference point ``x_ref`` evaluated on every subset: the noise energy
-cancels exactly, and what remains varies across subsets in proportion to ``|x - x_ref|``. The
-reference is the **incumbent**: the best point found so far judged on the whole log. It starts at
-the parameterisation's nominal. Each generation two candidates are evaluated on the whole log
+``c_s(x) - c_s(x_ref)`` of a point on its subset over the **incumbent** ``x_ref``, the best point
+found so far judged on the whole log, evaluated on every subset. It starts at the
+parameterisation's nominal. Each generation two candidates are evaluated on the whole log
 (counted): the personal best with the lowest excess, and the *consensus*, the mean of the
 ``Nnb(G)`` lowest-excess personal bests (averaging positions averages out the subset noise that the
 single lowest one is selected for; ``consensus=False`` drops it). The better replaces the incumbent
@@ -95,6 +90,7 @@ from estimators.base import SearchResult
 from estimators.options import check_bool, check_float, check_int
 from estimators.problem import IdentificationProblem
 from estimators.quadratic_step import POINTS_PER_COEFFICIENT, n_coefficients, quadratic_step
+from estimators.subset_costs import Incumbent, SubsetCosts
 from estimators.swarm import (
     DEFAULT_C1,
     DEFAULT_C2,
@@ -130,69 +126,6 @@ def scattered(rng: np.random.Generator, centre: FloatArray, radius: FloatArray |
     """
     xi = rng.standard_normal(centre.shape) * (np.reshape(radius, (-1, 1)) / np.sqrt(centre.shape[1]))
     return np.clip(centre + xi, 0.0, 1.0)
-
-
-class SubsetCosts:
-    """The log split into subsets, and costs of points on all of them from one whole-log prediction.
-
-    Attributes:
-        subsets: K index arrays (``problem.subsets``).
-        weights: (K,) fraction of the log's samples in each subset (the whole-log cost is ``weights @ costs``).
-    """
-
-    def __init__(self, problem: IdentificationProblem, n_subsets: int, kind: str) -> None:
-        self.subsets = problem.subsets(n_subsets, kind)
-        sizes = np.array([len(s) for s in self.subsets], dtype=float)
-        self.weights = sizes / problem.n_samples
-        self._mean = np.zeros((problem.n_samples, n_subsets))  # per-sample squared error -> per-subset mean
-        for s, index in enumerate(self.subsets):
-            self._mean[index, s] = 1.0 / (3.0 * sizes[s])
-
-    @property
-    def n_subsets(self) -> int:
-        """K."""
-        return len(self.subsets)
-
-    def on_all(self, problem: IdentificationProblem, theta: FloatArray) -> FloatArray:
-        """Costs (P, K) (rad/s)^2 of ``theta`` (P, k) on every subset; counted as P whole-log evaluations."""
-        error = problem.predict(theta) - problem.measured
-        return np.einsum("ptj,ptj->pt", error, error) @ self._mean
-
-
-class _Incumbent:
-    """The best point so far judged on the whole log; its per-subset costs are the reference of the excess costs.
-
-    Attributes:
-        unit: its unit-box position (k,); cost: its whole-log cost (rad/s)^2;
-        reference: its cost on each subset (K,); n_evaluated: whole-log evaluations spent on checks.
-    """
-
-    def __init__(self, problem: IdentificationProblem, split: SubsetCosts, theta: FloatArray) -> None:
-        self.problem, self.split = problem, split
-        self.unit = problem.parameters.to_unit(theta)
-        self.reference = split.on_all(problem, np.asarray(theta, dtype=float)[None])[0]
-        self.cost = float(split.weights @ self.reference)
-        self.n_evaluated = 1
-
-    def check(self, points: FloatArray, known: list[FloatArray | None]) -> FloatArray:
-        """Whole-log costs (m,) of unit-box ``points`` (m, k); the lowest replaces the incumbent if it beats it.
-
-        ``known[i]`` is point ``i``'s per-subset costs (K,) when already measured (not evaluated
-        again), else ``None`` (evaluated on the whole log, counted).
-        """
-        costs = np.empty((len(points), self.split.n_subsets))
-        todo = [i for i, c in enumerate(known) if c is None]
-        for i, c in enumerate(known):
-            if c is not None:
-                costs[i] = c
-        if todo:
-            costs[todo] = self.split.on_all(self.problem, self.problem.parameters.from_unit(points[todo]))
-            self.n_evaluated += len(todo)
-        whole = costs @ self.split.weights
-        if len(whole) and whole.min() < self.cost:
-            j = int(np.argmin(whole))
-            self.unit, self.cost, self.reference = points[j].copy(), float(whole[j]), costs[j].copy()
-        return whole
 
 
 class ImprovedPSO(SwarmEstimator):
@@ -321,7 +254,7 @@ class ImprovedPSO(SwarmEstimator):
         n, n_generations = self.n_particles, self.n_generations
         split = SubsetCosts(problem, self.n_subsets if self.sequential else 1, self.subset_kind)
         ranks = np.arange(n)
-        best = _Incumbent(problem, split, params.nominal)  # the reference of the excess costs
+        best = Incumbent(problem, split, params.nominal)  # the reference of the excess costs
 
         unit, velocity = self._initial_swarm(rng, n, problem.n_params)
         best_unit = unit.copy()
@@ -383,7 +316,7 @@ class ImprovedPSO(SwarmEstimator):
             },
         )
 
-    def _check_candidates(self, best: _Incumbent, best_unit: FloatArray, best_raw: FloatArray, best_subset: IntArray) -> None:
+    def _check_candidates(self, best: Incumbent, best_unit: FloatArray, best_raw: FloatArray, best_subset: IntArray) -> None:
         """Whole-log checks of the lowest-excess personal best and of the consensus; updates ``best`` and ``best_raw``.
 
         Args:
@@ -420,7 +353,7 @@ class ImprovedPSO(SwarmEstimator):
         """
         return n_subsets * max(1, -(-self._per_subset_fit(n_subsets, n_params) // self.n_particles))
 
-    def _check_quadratic(self, best: _Incumbent, recent: deque[Evaluations], radius: float) -> float:
+    def _check_quadratic(self, best: Incumbent, recent: deque[Evaluations], radius: float) -> float:
         """Whole-log check (counted) of the minimum of a quadratic fitted to the recent evaluations; may replace ``best``.
 
         ``recent``: the last generations' ``(unit (N, k), subset (N,), raw cost (N,))``
@@ -458,7 +391,7 @@ class ImprovedPSO(SwarmEstimator):
     def _follow(
         self,
         rng: np.random.Generator,
-        best: _Incumbent,
+        best: Incumbent,
         moved_from: FloatArray,
         unit: FloatArray,
         velocity: FloatArray,

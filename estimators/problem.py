@@ -31,7 +31,7 @@ from estimators.models.effect_models import EffectContext, EffectPrediction, mak
 from estimators.models.momentum_model import MomentumModel, Samples
 from estimators.parameters import FuelParameters, Parameterisation, WithEffects, make_parameterisation
 from spaceid_gym.arrays import FloatArray
-from spaceid_gym.effects import remaining_liquid_kg
+from spaceid_gym.effects.draws import remaining_liquid_kg
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.information import cramer_rao_std
 from spaceid_gym.log import MeasurementLog
@@ -133,7 +133,7 @@ def _slosh_locators(
 ) -> tuple[Callable[[FloatArray], FloatArray] | None, Callable[[FloatArray], FloatArray] | None]:
     """Where a slosh mass sits (P, 3) and how much liquid is left to slosh (P,) kg, for ``theta_base`` (P, k_base):
     with the fuel parameters, the tank (full-tank CoM + bf) and the usable fuel minus the fuel consumed
-    (:func:`~spaceid_gym.effects.remaining_liquid_kg`, as in the simulator); else ``(None, None)`` (the term's
+    (:func:`~spaceid_gym.effects.draws.remaining_liquid_kg`, as in the simulator); else ``(None, None)`` (the term's
     defaults: the full-tank CoM and the usable fuel)."""
     if not isinstance(base, FuelParameters):
         return None, None

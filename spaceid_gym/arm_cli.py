@@ -37,8 +37,9 @@ from estimators.diagnostics.plots import plot_overlay
 from estimators.evaluation import estimator_from_spec, parse_estimator_specs
 from spaceid_gym.arm.datasets import simulate_arm_dataset  # the optimiser and simulator load only when used
 from spaceid_gym.arm.friction import FRICTION_TERMS
+from spaceid_gym.arm.joint_sensors import ArmSensorModel
 from spaceid_gym.arm.robot import load_arm
-from spaceid_gym.arm.torque_simulator import INTERNAL_RATE_HZ, SAMPLE_RATE_HZ, ArmSensorModel
+from spaceid_gym.arm.torque_simulator import INTERNAL_RATE_HZ, SAMPLE_RATE_HZ
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.executors import add_executor_arguments, executor_from_arguments
 from spaceid_gym.files import write_json_atomic, write_text_atomic

@@ -2,44 +2,23 @@
 
 Every bad input ends in a one-line ``spaceid: error: ...`` message and exit code 2, without a
 traceback. The command sits at the top of the package graph: nothing imports it.
+
+This module holds the arguments of every command and the dispatch; the commands' bodies are in
+:mod:`spaceid_gym.free_floating_cli` (one log: simulate, identify, compare, diagnose, report),
+:mod:`spaceid_gym.harness_cli` (many simulated logs: evaluate, diagnose-suite), :mod:`spaceid_gym.arm_cli`
+(``spaceid arm ...``), :mod:`spaceid_gym.tracking` (track) and :mod:`agents.cli_commands` (excite).
 """
 
 from __future__ import annotations
 
 import argparse
-import dataclasses
-import json
 import sys
-import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
-from agents.cli_commands import add_excite_arguments, excitation_source, run_excite
-from estimators.diagnostics.compare import compare, model_from_estimate
-from estimators.diagnostics.plots import plot_correlations, plot_overlay, plot_residuals
-from estimators.diagnostics.suite import (
-    DIAGNOSTIC_EXCITATION,
-    SUITE_EFFECTS,
-    code_version,
-    failed_rows,
-    parse_magnitudes,
-    run_matrix,
-    run_suite,
-    write_matrix,
-    write_suite,
-)
-from estimators.diagnostics.workflow import apply_effect, run_loop, write_report
-from estimators.evaluation import (
-    draw_settings,
-    estimator_from_spec,
-    parse_estimator_specs,
-    run_evaluation,
-    settings_info,
-    write_results,
-)
-from estimators.problem import IdentificationModel
+from agents.cli_commands import add_excite_arguments, run_excite
 from spaceid_gym.arm_cli import (
     ARM_COMMANDS,
     add_arm_cross_validate_arguments,
@@ -47,18 +26,13 @@ from spaceid_gym.arm_cli import (
     add_arm_identify_arguments,
     add_arm_simulate_arguments,
 )
-from spaceid_gym.datasets import simulate_episode, write_episode_dataset
 from spaceid_gym.demo import run_demo
 from spaceid_gym.errors import SpaceIdInputError
-from spaceid_gym.executors import ExecutorSpec, add_executor_arguments, executor_from_arguments
-from spaceid_gym.files import write_json_atomic
-from spaceid_gym.limits import check_count, check_log_size, max_jobs
-from spaceid_gym.log import MeasurementLog
-from spaceid_gym.mission import FuelSchedule
-from spaceid_gym.robots import load_robot
-from spaceid_gym.sim.sensors import ARCSEC_RAD, ATTITUDE_SOURCES, SensorModel
+from spaceid_gym.executors import add_executor_arguments
+from spaceid_gym.free_floating_cli import run_compare, run_diagnose_or_report, run_identify, run_simulate
+from spaceid_gym.harness_cli import run_diagnose_suite, run_evaluate
+from spaceid_gym.sim.sensors import ATTITUDE_SOURCES
 from spaceid_gym.tracking import add_track_arguments, run_track
-from spaceid_gym.variations import AXIS_RANGES, AXIS_VALUES, parse_fixed
 
 
 def _vector3(text: str) -> np.ndarray:
@@ -268,17 +242,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     try:
         if args.command == "simulate":
-            _simulate(args)
+            run_simulate(args)
         elif args.command == "identify":
-            _identify(args)
+            run_identify(args)
         elif args.command == "evaluate":
-            _evaluate(args)
+            run_evaluate(args)
         elif args.command == "compare":
-            _compare(args)
+            run_compare(args)
         elif args.command in ("diagnose", "report"):
-            _diagnose_or_report(args)
+            run_diagnose_or_report(args)
         elif args.command == "diagnose-suite":
-            return _diagnose_suite(args)
+            return run_diagnose_suite(args)
         elif args.command == "excite":
             run_excite(args)
         elif args.command == "track":
@@ -294,234 +268,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("spaceid: interrupted; files are written whole at the end, so none was left half-written", file=sys.stderr)
         return 130
     return 0
-
-
-def _simulate(args: argparse.Namespace) -> None:
-    if not (np.isfinite(args.rate) and args.rate > 0):
-        raise SpaceIdInputError(f"--rate: expected a positive rate in Hz, got {args.rate!r}")
-    sensors = _sensor_model(args)
-    robot = load_robot(args.robot)
-    check_log_size(args.duration, 1.0 / args.rate, robot.n_joints, "--duration")
-    tank = (
-        args.tank
-        if args.tank is not None
-        else FuelSchedule().draw_tank_position(robot.base_full, np.random.default_rng(args.seed))
-    )
-    excitation, excitation_info = excitation_source(args.excitation, robot, args.seed)
-    start = time.perf_counter()
-    env = simulate_episode(
-        robot,
-        duration_s=args.duration,
-        fuel_consumed_kg=args.fuel_consumed,
-        tank_position_m=tank,
-        excitation=excitation,
-        seed=args.seed,
-        sensors=sensors,
-        control_period_s=1.0 / args.rate,
-        hidden_effects=args.hidden_effects,
-    )
-    dataset = write_episode_dataset(args.out, env, {"seed": args.seed, "excitation": excitation_info})
-    truth = dataset.truth or {}
-    effects = ", ".join(env.effects.names)
-    print(
-        f"wrote {dataset.path}/ ({dataset.log.n_samples} samples, {dataset.log.duration_s:.1f} s, "
-        f"{time.perf_counter() - start:.2f} s wall): base mass {truth['base_mass_kg']:.2f} kg, "
-        f"fuel consumed {truth['fuel_consumed_kg']:.2f} kg, tank {json.dumps([round(x, 4) for x in truth['tank_position_m']])} m"
-        + (f", hidden effects: {effects}" if effects else "")
-        + (f", attitude: {args.attitude}" if args.attitude != "star_tracker" else "")
-    )
-
-
-def _sensor_model(args: argparse.Namespace) -> SensorModel:
-    """The sensors ``spaceid simulate`` asks for; a bad value of an option raises naming it.
-
-    Options: --noise-free, --attitude, --star-tracker-arcsec, --noise-scale, --attitude-time-constant.
-    """
-    if not (np.isfinite(args.star_tracker_arcsec) and args.star_tracker_arcsec >= 0.0):
-        raise SpaceIdInputError(
-            f"--star-tracker-arcsec: expected a finite number of arcseconds >= 0, got {args.star_tracker_arcsec!r}"
-        )
-    if not (np.isfinite(args.noise_scale) and args.noise_scale > 0.0):
-        raise SpaceIdInputError(f"--noise-scale: expected a finite factor > 0, got {args.noise_scale!r}")
-    source, tau = args.attitude, args.attitude_time_constant
-    if tau is not None and not (np.isfinite(tau) and tau > 0.0):
-        raise SpaceIdInputError(f"--attitude-time-constant: expected a finite number of seconds > 0, got {tau!r}")
-    if args.noise_free:
-        return dataclasses.replace(SensorModel.noise_free(), attitude_source=source, attitude_filter_time_constant_s=tau)
-    return SensorModel(
-        attitude_noise_rad=args.star_tracker_arcsec * ARCSEC_RAD,
-        noise_scale=args.noise_scale,
-        attitude_source=source,
-        attitude_filter_time_constant_s=tau,
-    )
-
-
-def _identify(args: argparse.Namespace) -> None:
-    robot = load_robot(args.robot)
-    estimator = estimator_from_spec(args.estimator, seed=args.seed)
-    bounds = {k: v for k, v in (("lower", args.lower), ("upper", args.upper)) if v is not None}
-    model = IdentificationModel(robot, args.params, noise_std_rad_s=args.noise_std, effects=args.effects, **bounds)
-    log = MeasurementLog.from_csv(args.log, n_joints=robot.n_joints)
-    estimate = estimator.fit(model, log)
-    estimate.write_json(args.out)
-    print(f"wrote {args.out} ({estimate.estimator}, {estimate.n_evaluations:.0f} evaluations, {estimate.wall_time_s:.2f} s)")
-    for name, value, std, ok in zip(estimate.names, estimate.theta, estimate.theta_std, estimate.identifiable, strict=True):
-        print(f"  {name:>18} = {value:.6g} +- {std:.3g}" if ok else f"  {name:>18}: not identifiable from this log")
-    for message in estimate.insufficient_excitation:
-        print(message)
-
-
-def _compare(args: argparse.Namespace) -> None:
-    robot = load_robot(args.robot)
-    model, theta = model_from_estimate(robot, args.estimate)
-    log = MeasurementLog.from_csv(args.log, n_joints=robot.n_joints)
-    result = compare(model, log, theta, args.noise_std)
-    args.out.mkdir(parents=True, exist_ok=True)
-    write_json_atomic(args.out / "comparison.json", result.to_dict())
-    a = result.analysis
-    plot_overlay(
-        args.out / "overlay.png", result.t_s, result.measured, result.predicted, a.segments, title=f"Model {result.label}"
-    )
-    plot_residuals(args.out / "residuals.png", result.t_s, result.residual, a.noise_std, a.segments)
-    plot_correlations(args.out / "correlations.png", a)
-    print(result.summary())
-    print(a.structure_description())
-    print(f"wrote {args.out}/comparison.json, overlay.png, residuals.png, correlations.png")
-
-
-def _diagnose_or_report(args: argparse.Namespace) -> None:
-    robot = load_robot(args.robot)
-    log = MeasurementLog.from_csv(args.log, n_joints=robot.n_joints)
-    model = IdentificationModel(robot, args.params, effects=args.effects)
-    estimator = estimator_from_spec(args.estimator, seed=args.seed)
-    candidates = None if args.candidates is None else [c.strip() for c in args.candidates.split(",") if c.strip()]
-    apply = None if args.apply in (None, "none") else args.apply
-    truth = _truth_next_to(args.log) if getattr(args, "truth", None) is None else _read_json(args.truth)
-    start = time.perf_counter()
-    result = run_loop(model, log, truth=truth, apply=apply, estimator=estimator, candidates=candidates)
-    print(result.summary())
-    if args.command == "report":
-        path = write_report(result, args.out)
-        print(f"wrote {path} ({time.perf_counter() - start:.1f} s)")
-        return
-    args.out.mkdir(parents=True, exist_ok=True)
-    write_json_atomic(args.out / "diagnosis.json", result.to_dict()["diagnosis"])
-    written = ["diagnosis.json"]
-    if result.applied is not None:
-        _, estimate = apply_effect(model, log, result.applied, result.diagnosis)
-        estimate.write_json(args.out / "estimate_after.json")
-        written.append("estimate_after.json")
-    print(f"wrote {', '.join(f'{args.out}/{w}' for w in written)} ({time.perf_counter() - start:.1f} s)")
-
-
-def _diagnose_suite(args: argparse.Namespace) -> int:
-    """Runs the suite (or with ``--matrix`` the variation matrix) and writes it; exit code 1 (after writing) if the
-    diagnosis of any log raised."""
-    executor = executor_from_arguments(args, max_jobs())
-    check_count(args.seeds, "--seeds")
-    if args.first_seed < 0:
-        raise SpaceIdInputError(f"--first-seed: expected an integer >= 0, got {args.first_seed}")
-    check_log_size(args.duration, 1.0 / max(AXIS_VALUES["rate_hz"]), 7, "--duration")  # the matrix's fastest, largest
-    effects = SUITE_EFFECTS if args.effects is None else tuple(e.strip() for e in args.effects.split(",") if e.strip())
-    unknown = [e for e in effects if e not in SUITE_EFFECTS]
-    if unknown:
-        raise SpaceIdInputError(f"--effects: unknown {unknown}; expected names from {', '.join(SUITE_EFFECTS)}")
-    if not effects:
-        raise SpaceIdInputError(f"--effects: expected at least one of {', '.join(SUITE_EFFECTS)}")
-    runs = {"seeds": args.seeds, "first_seed": args.first_seed, "effects": list(effects), "duration_s": args.duration}
-    runs["executor"] = executor.describe()
-    if args.matrix:
-        return _diagnose_matrix(args, effects, runs, executor)
-    if args.fix is not None:
-        raise SpaceIdInputError("--fix: pins axes of the variation matrix; give --matrix too")
-    robot = args.robot or "paper6"
-    magnitudes = parse_magnitudes(args.magnitude, effects, robot, range(args.first_seed, args.first_seed + args.seeds))
-    info: dict[str, object] = {"robot": robot, **runs, "magnitudes": magnitudes, "excitation": DIAGNOSTIC_EXCITATION}
-    rows = _timed_run(info, lambda: run_suite(robot, effects, args.seeds, args.first_seed, executor, args.duration, magnitudes))
-    return _report_suite(rows, write_suite(args.out, rows, info), info)
-
-
-def _timed_run(info: dict[str, object], run: Callable[[], list[dict[str, object]]]) -> list[dict[str, object]]:
-    """``run()``'s rows; adds the code's version (read before it runs) and the wall time to ``info``."""
-    start = time.perf_counter()
-    info["code_version"] = code_version()
-    rows = run()
-    info["wall_time_s"] = time.perf_counter() - start
-    return rows
-
-
-def _diagnose_matrix(args: argparse.Namespace, effects: tuple[str, ...], runs: dict[str, object], executor: ExecutorSpec) -> int:
-    """``diagnose-suite --matrix``: the variation matrix, written to ``--out`` (``runs``: the seeds, effects and
-    duration, for ``summary.json``)."""
-    if args.robot is not None or args.magnitude is not None:
-        raise SpaceIdInputError("--robot and --magnitude: not with --matrix, whose logs draw them (pin with --fix robot=...)")
-    try:
-        fixed = parse_fixed(args.fix)
-    except SpaceIdInputError as exc:
-        raise SpaceIdInputError(f"--fix: {exc}") from None
-    info: dict[str, object] = {"matrix": True, **runs, "fixed": fixed, "axis_values": AXIS_VALUES, "axis_ranges": AXIS_RANGES}
-    rows = _timed_run(info, lambda: run_matrix(effects, args.seeds, args.first_seed, executor, args.duration, fixed))
-    return _report_suite(rows, write_matrix(args.out, rows, info), info)
-
-
-def _report_suite(rows: list[dict[str, object]], paths: dict[str, Path], info: dict[str, object]) -> int:
-    """Print the table and the logs that failed; exit code 1 if any did."""
-    print(paths["table"].read_text())
-    print(
-        f"{len(rows)} logs in {info['wall_time_s']:.1f} s ({info.get('executor', 'serial')}); wrote {', '.join(p.name for p in paths.values())}"
-    )
-    failed = failed_rows(rows)
-    for row in failed:
-        print(
-            f"spaceid: error: diagnosis of the {row['effect']} log of seed {row['seed']} raised {row['error']}", file=sys.stderr
-        )
-    if failed:
-        print(
-            f"spaceid: error: {len(failed)} of {len(rows)} logs failed (verdict 'error' in {paths['csv'].name})", file=sys.stderr
-        )
-    return 1 if failed else 0
-
-
-def _truth_next_to(log_path: Path) -> dict | None:
-    """A simulated dataset's truth.json next to its log, if there is one."""
-    path = log_path.parent / "truth.json"
-    return _read_json(path) if path.is_file() else None
-
-
-def _read_json(path: Path) -> dict:
-    try:
-        return json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
-        raise SpaceIdInputError(f"{path}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
-
-
-def _evaluate(args: argparse.Namespace) -> None:
-    check_count(args.settings, "--settings")
-    executor = executor_from_arguments(args, max_jobs())
-    robot = load_robot(args.robot)
-    check_log_size(args.duration, 0.02, robot.n_joints, "--duration")
-    specs = parse_estimator_specs(args.estimators)
-    settings = draw_settings(robot, args.settings, args.seed)
-    start = time.perf_counter()
-    rows = run_evaluation(
-        args.robot,
-        specs,
-        settings,
-        budget_reference=args.budget_reference or None,
-        duration_s=args.duration,
-        executor=executor,
-        seed=args.seed,
-    )
-    wall_s = time.perf_counter() - start
-    info = settings_info(args.robot, settings, args.seed, args.duration, 0.02) | {
-        "executor": executor.describe(),
-        "wall_time_s": wall_s,
-    }
-    paths = write_results(args.out, rows, info)
-    print(paths["table"].read_text())
-    print(
-        f"{len(settings)} settings x {len(specs)} estimators in {wall_s:.1f} s ({executor.describe()}); wrote {', '.join(p.name for p in paths.values())}"
-    )
 
 
 if __name__ == "__main__":

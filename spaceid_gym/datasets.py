@@ -14,7 +14,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import NDArray
 
-from spaceid_gym.effects import HiddenEffects
+from spaceid_gym.effects.settings import HiddenEffects
 from spaceid_gym.envs.free_floating import FreeFloatingIDEnv
 from spaceid_gym.limits import check_log_size
 from spaceid_gym.log import Dataset, load_dataset, write_dataset

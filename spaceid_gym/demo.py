@@ -32,7 +32,7 @@ from estimators.diagnostics.workflow import run_loop, write_report
 from estimators.problem import IdentificationModel
 from estimators.registry import make_estimator
 from spaceid_gym.datasets import simulate_episode, write_episode_dataset
-from spaceid_gym.effects import draw_effect
+from spaceid_gym.effects.draws import draw_effect
 from spaceid_gym.envs.render import RobotRenderer, base_half_extents_from_inertia
 from spaceid_gym.excitation import FourierExcitation
 from spaceid_gym.log import Dataset, MeasurementLog

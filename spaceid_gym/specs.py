@@ -3,7 +3,7 @@
 A list of settings is written ``"a,b[key=value,other=[1,2]],c"``: items separated by the commas outside brackets,
 each a name with optional options in brackets; an option's value may hold brackets and commas of its own
 (``inertia=[0.9,0.4]``). This module reads the syntax only; what a name or a value means (and the message for a bad
-one) is the caller's: :func:`estimators.evaluation.estimator_from_spec`, :func:`spaceid_gym.effects.parse_effect_spec`
+one) is the caller's: :func:`estimators.evaluation.estimator_from_spec`, :func:`spaceid_gym.effects.spec_strings.parse_effect_spec`
 and :func:`estimators.models.effect_models.parse_effects`.
 """
 

@@ -21,7 +21,7 @@ size_factor     log-uniform in [0.3, 3]: the hidden effect's size over its catal
                 (:data:`~spaceid_gym.effects.DEFAULT_MAGNITUDES`; slosh: the mass over 30 % of the liquid left,
                 capped at the liquid left); ``None`` for a clean log
 slosh_model     ``spring``, ``pendulum`` (slosh logs only, else ``None``)
-slosh_period_s  log-uniform over :data:`~spaceid_gym.effects.SLOSH_PERIOD_RANGE_S` (2-50 s; slosh logs only)
+slosh_period_s  log-uniform over :data:`~spaceid_gym.effects.draws.SLOSH_PERIOD_RANGE_S` (2-50 s; slosh logs only)
 ==============  ==========================================================================================
 
 A pendulum's rod points anywhere (uniform on the sphere, base frame: the settling acceleration of a real tank is
@@ -51,17 +51,15 @@ from typing import Any
 import numpy as np
 
 from spaceid_gym.datasets import Excitation, simulate_episode
-from spaceid_gym.effects import (
+from spaceid_gym.effects.draws import (
     DEFAULT_MAGNITUDES,
-    EFFECT_NAMES,
-    SLOSH_MODELS,
     SLOSH_PERIOD_RANGE_S,
-    HiddenEffects,
     draw_effect,
     draw_slosh,
     random_unit_vector,
     remaining_liquid_kg,
 )
+from spaceid_gym.effects.settings import EFFECT_NAMES, SLOSH_MODELS, HiddenEffects
 from spaceid_gym.envs.free_floating import FreeFloatingIDEnv
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.excitation import FourierExcitation, SmoothRandomExcitation

@@ -15,7 +15,7 @@ import pytest
 
 from agents.arm_comparison import ARM_METHODS, run_arm_comparison, write_arm_comparison
 from spaceid_gym.arm.excitation_design import optimise_excitation
-from spaceid_gym.arm.torque_simulator import ArmSensorModel
+from spaceid_gym.arm.joint_sensors import ArmSensorModel
 from spaceid_gym.cli import main
 from spaceid_gym.envs.manipulator import ManipulatorIDEnv
 from spaceid_gym.errors import SpaceIdInputError

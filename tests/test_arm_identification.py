@@ -28,9 +28,9 @@ from estimators.arm.model import ArmIdentificationModel
 from estimators.arm.synthetic import last_link_problem
 from estimators.evaluation import estimator_from_spec
 from spaceid_gym.arm.datasets import simulate_arm_dataset
+from spaceid_gym.arm.joint_sensors import ArmSensorModel
 from spaceid_gym.arm.robot import load_arm
 from spaceid_gym.arm.signal import lowpass_zero_phase, prepare_for_identification
-from spaceid_gym.arm.torque_simulator import ArmSensorModel
 from spaceid_gym.cli import main
 from spaceid_gym.errors import SpaceIdInputError
 

@@ -20,7 +20,8 @@ from spaceid_gym.robots import Robot
 from spaceid_gym.sim.attitude_filter import filter_gain, filter_time_constant_s, steady_state_error_std_rad
 from spaceid_gym.sim.lie import matrix_from_quat, quat_from_matrix
 from spaceid_gym.sim.sensors import ARCSEC_RAD, ATTITUDE_SOURCES, Measurement, SensorModel
-from spaceid_gym.sim.simulator import FreeFloatingSimulator, FreeFloatingState
+from spaceid_gym.sim.simulator import FreeFloatingSimulator
+from spaceid_gym.sim.state import FreeFloatingState
 
 DT_S = 0.02
 

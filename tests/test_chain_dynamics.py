@@ -14,7 +14,8 @@ import pytest
 from spaceid_gym.arm import ArmRegressor, load_arm
 from spaceid_gym.arm.chain_dynamics import SerialChain
 from spaceid_gym.arm.excitation_design import random_fourier_trajectory
-from spaceid_gym.arm.torque_simulator import ArmSimulator, ParameterPrior, TrackingController
+from spaceid_gym.arm.parameter_prior import ParameterPrior
+from spaceid_gym.arm.torque_simulator import ArmSimulator, TrackingController
 
 
 def _unaligned_chain(rng: np.random.Generator) -> pin.Model:

@@ -30,7 +30,7 @@ from estimators.diagnostics.workflow import parameter_errors, run_loop, write_re
 from estimators.problem import IdentificationModel
 from estimators.registry import make_estimator
 from spaceid_gym.datasets import simulate_episode
-from spaceid_gym.effects import HiddenEffects
+from spaceid_gym.effects.settings import HiddenEffects
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.excitation import FourierExcitation
 from spaceid_gym.robots import Robot

@@ -94,7 +94,7 @@ def test_the_same_seed_draws_the_same_direction_at_any_magnitude() -> None:
     """``--magnitude`` scales the suite's effect without changing its draw or the fuel state (the same logs otherwise)."""
     import numpy as np
 
-    from spaceid_gym.effects import DEFAULT_MAGNITUDES
+    from spaceid_gym.effects.draws import DEFAULT_MAGNITUDES
     from spaceid_gym.robots import load_robot
 
     robot = load_robot("paper6")

@@ -12,7 +12,8 @@ from estimators.models.effect_models import DELAY_BAND_HZ, EFFECT_TERMS, make_te
 from estimators.models.fractional_delay import delay_samples
 from estimators.problem import IdentificationModel
 from spaceid_gym.datasets import simulate_episode
-from spaceid_gym.effects import HiddenEffects, draw_effect
+from spaceid_gym.effects.draws import draw_effect
+from spaceid_gym.effects.settings import HiddenEffects
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.excitation import FourierExcitation
 from spaceid_gym.robots import Robot

@@ -23,19 +23,18 @@ import pytest
 
 from spaceid_gym.cli import main
 from spaceid_gym.datasets import simulate_episode
-from spaceid_gym.effects import (
+from spaceid_gym.effects.draws import (
     DEFAULT_MAGNITUDES,
-    EFFECT_NAMES,
     ORBITAL_RATE_RAD_S,
     PAYLOAD_BOX_M,
     PAYLOAD_DISTANCE_M,
     SLOSH_PERIOD_RANGE_S,
-    HiddenEffects,
     draw_effect,
     draw_slosh,
-    parse_hidden_effects,
     remaining_liquid_kg,
 )
+from spaceid_gym.effects.settings import EFFECT_NAMES, HiddenEffects
+from spaceid_gym.effects.spec_strings import parse_hidden_effects
 from spaceid_gym.envs import FreeFloatingIDEnv
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.log import load_dataset
@@ -43,7 +42,8 @@ from spaceid_gym.physics.fuel import base_after_fuel
 from spaceid_gym.physics.inertia import RigidBodyInertia, skew
 from spaceid_gym.physics.momentum import base_rate_from_joint_motion
 from spaceid_gym.robots import Robot
-from spaceid_gym.sim.simulator import FreeFloatingSimulator, FreeFloatingState
+from spaceid_gym.sim.simulator import FreeFloatingSimulator
+from spaceid_gym.sim.state import FreeFloatingState
 
 DT = 0.02
 TANK = np.array([0.1, 0.05, -0.1])  # quick3 tank position bf (m, from the full-tank CoM)

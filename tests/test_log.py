@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import spaceid_gym.files as files_module
-import spaceid_gym.log as log_module
+import spaceid_gym.log_format as log_format_module
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.log import Dataset, MeasurementLog, load_dataset, write_dataset
 from spaceid_gym.robots import load_robot
@@ -242,7 +242,7 @@ def test_failed_write_keeps_previous_file_and_leaves_no_temp(tmp_path: Path, mon
     path = make_log(seed=1).to_csv(tmp_path / "log.csv")
     before = path.read_bytes()
     calls = 0
-    real_format_row = log_module._format_row
+    real_format_row = log_format_module._format_row
 
     def failing_format_row(values: list[float]) -> str:
         nonlocal calls
@@ -251,7 +251,7 @@ def test_failed_write_keeps_previous_file_and_leaves_no_temp(tmp_path: Path, mon
             raise OSError("disk full")
         return real_format_row(values)
 
-    monkeypatch.setattr(log_module, "_format_row", failing_format_row)
+    monkeypatch.setattr(log_format_module, "_format_row", failing_format_row)
     with pytest.raises(OSError, match="disk full"):
         make_log(seed=2).to_csv(path)
     assert calls == 5  # the temp file was opened and partly written

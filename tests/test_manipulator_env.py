@@ -12,7 +12,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import spaceid_gym  # noqa: F401  (registers the env)
-from spaceid_gym.arm.torque_simulator import ArmSensorModel
+from spaceid_gym.arm.joint_sensors import ArmSensorModel
 from spaceid_gym.envs.manipulator import ManipulatorIDEnv
 from spaceid_gym.information import log_det
 

@@ -8,11 +8,12 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from estimators.improved_pso import ImprovedPSO, SubsetCosts
+from estimators.improved_pso import ImprovedPSO
 from estimators.problem import IdentificationModel, IdentificationProblem
 from estimators.pso import ParticleSwarm
 from estimators.quadratic_step import quadratic_step
 from estimators.registry import make_estimator
+from estimators.subset_costs import SubsetCosts
 from estimators.swarm import (
     DEFAULT_C1,
     DEFAULT_C2,

@@ -16,7 +16,8 @@ from spaceid_gym.mission import FuelSchedule
 from spaceid_gym.physics.fuel import base_after_fuel
 from spaceid_gym.physics.momentum import base_rate_from_joint_motion
 from spaceid_gym.robots import Robot, available_robots, load_robot
-from spaceid_gym.sim.simulator import FreeFloatingSimulator, FreeFloatingState
+from spaceid_gym.sim.simulator import FreeFloatingSimulator
+from spaceid_gym.sim.state import FreeFloatingState
 
 DT_S = 0.02
 #: the design tank of orbit7 (its URDF comment), m, base axes, from the full-tank CoM

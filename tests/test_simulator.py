@@ -20,7 +20,8 @@ from spaceid_gym.physics.momentum import base_rate_from_joint_motion
 from spaceid_gym.robots import Robot, load_robot
 from spaceid_gym.sim.lie import dexp_inv, matrix_from_quat, quat_from_matrix, so3_exp
 from spaceid_gym.sim.servo import default_servo
-from spaceid_gym.sim.simulator import FreeFloatingSimulator, FreeFloatingState
+from spaceid_gym.sim.simulator import FreeFloatingSimulator
+from spaceid_gym.sim.state import FreeFloatingState
 
 DT = 0.02
 

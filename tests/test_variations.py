@@ -17,7 +17,7 @@ from estimators.diagnostics import suite
 from estimators.diagnostics.power import expected_power, power_of
 from estimators.problem import IdentificationModel
 from spaceid_gym.cli import main
-from spaceid_gym.effects import DEFAULT_MAGNITUDES, remaining_liquid_kg
+from spaceid_gym.effects.draws import DEFAULT_MAGNITUDES, remaining_liquid_kg
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.excitation import SmoothRandomExcitation
 from spaceid_gym.robots import load_robot

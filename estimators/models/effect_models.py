@@ -69,7 +69,7 @@ from estimators.models.mass_effects import TYPICAL_PAYLOAD_SIZE_M as TYPICAL_PAY
 from estimators.models.mass_effects import Payload, Slosh, _point_mass10
 from estimators.models.mass_effects import payload_box as payload_box
 from spaceid_gym.arrays import FloatArray
-from spaceid_gym.effects import SLOSH_MODELS
+from spaceid_gym.effects.settings import SLOSH_MODELS
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.robots import Robot
 from spaceid_gym.specs import parse_setting, split_outside_brackets

@@ -13,7 +13,8 @@ from numba import njit
 
 from estimators.models.effect_base import EffectContext, EffectTerm
 from spaceid_gym.arrays import FloatArray
-from spaceid_gym.effects import SLOSH_MODELS, remaining_liquid_kg
+from spaceid_gym.effects.draws import remaining_liquid_kg
+from spaceid_gym.effects.settings import SLOSH_MODELS
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.physics.inertia import PARAMS10_NAMES, RigidBodyInertia, skew, spatial_inertia_matrix
 from spaceid_gym.robots import Robot

@@ -32,16 +32,11 @@ from spaceid_gym.arm.excitation_design import (
     regressor_condition,
 )
 from spaceid_gym.arm.friction import FrictionModel
+from spaceid_gym.arm.joint_sensors import ArmSensorModel
+from spaceid_gym.arm.parameter_prior import ParameterPrior
 from spaceid_gym.arm.regressor import ArmRegressor, BaseParameterSet
 from spaceid_gym.arm.robot import ArmRobot, load_arm
-from spaceid_gym.arm.torque_simulator import (
-    INTERNAL_RATE_HZ,
-    SAMPLE_RATE_HZ,
-    ArmSensorModel,
-    ArmSimulation,
-    ArmSimulator,
-    ParameterPrior,
-)
+from spaceid_gym.arm.torque_simulator import INTERNAL_RATE_HZ, SAMPLE_RATE_HZ, ArmSimulation, ArmSimulator
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.log import write_dataset
 

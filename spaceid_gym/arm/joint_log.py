@@ -25,7 +25,8 @@ from numpy.typing import NDArray
 from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.files import atomic_open
-from spaceid_gym.log import JointTimeSeries, _read_csv_rows
+from spaceid_gym.log import JointTimeSeries
+from spaceid_gym.log_format import read_csv_rows
 
 PathLike = str | os.PathLike[str]
 
@@ -160,7 +161,7 @@ class ArmLog(JointTimeSeries):
             SpaceIdInputError: naming the file and, where relevant, the column and the file line.
         """
         path = Path(path)
-        rows, lines = _read_csv_rows(path)
+        rows, lines = read_csv_rows(path)
         if not rows:
             raise SpaceIdInputError(f"{path}: file is empty; expected the header '{_HEADER_FORMAT}' and data rows")
         header = [cell.strip() for cell in rows[0]]

@@ -30,9 +30,10 @@ integrator at a kHz rate can follow. Compensated, the closed loop is
 body with ``u - tau_f(dq) = RNEA_c(q, dq, v)``; the logged motor torque ``u`` contains the friction.
 The controller sees the true state (no sensor noise in the loop) and is not saturated at the
 torque limits (the largest ``|u| / limit`` is reported as ``max_torque_fraction``). With the
-default bandwidth (2 pi 30 Hz) and a robot drawn from :class:`ParameterPrior` (10 %, 1 cm), the
-tracking error of a Fourier excitation is about 3e-5 rad on joints 1-3 and up to 3e-3 rad on the
-light wrist joints, whose CoM error (1 cm on links of 0.2 - 1.2 kg) the nominal model misses.
+default bandwidth (2 pi 30 Hz) and a robot drawn from
+:class:`~spaceid_gym.arm.parameter_prior.ParameterPrior` (10 %, 1 cm), the tracking error of a
+Fourier excitation is about 3e-5 rad on joints 1-3 and up to 3e-3 rad on the light wrist joints,
+whose CoM error (1 cm on links of 0.2 - 1.2 kg) the nominal model misses.
 
 Integration and sampling
 ------------------------
@@ -44,17 +45,9 @@ that state (ABA), so ``u = Y(q, dq, ddq) p`` holds at every sample to round-off 
 integration error; free motion (``controller=None``, no friction) conserves energy to RK4's
 fourth order (tests).
 
-Sensors (:class:`ArmSensorModel`)
----------------------------------
-White Gaussian noise from the generator passed in, defaults an ASSUMPTION of the order the real
-UR5 logs (``shared/data/ur5-real``, movements No5 and No8) show: a robust per-sample noise estimate
-(median absolute third difference / 0.6745 / sqrt(20), which removes smooth motion) gives
-1e-5 - 1e-4 rad on ``q_actual`` (printed to 1e-6 rad), 1e-3 - 4e-2 rad/s on ``qd_actual`` and
-0.03 - 0.25 A on ``i_actual``. Defaults: encoders 1e-5 rad, joint rates 2e-3 rad/s (about an
-encoder difference at 125 Hz: sqrt(2) 1e-5 rad * 125 Hz = 1.8e-3 rad/s), current 0.07 A per joint,
-i.e. torque noise ``0.07 A * k_t`` = 0.53, 0.48, 0.50, 0.20, 0.22, 0.24 N m with the UR5's
-approximate torque constants :data:`~spaceid_gym.arm.real_logs.UR5_TORQUE_CONSTANTS_NM_A`.
-The effort is logged as torque ``u`` (N m) or current ``u / k_t`` (A).
+Sensors: white noise on the joint angles, rates and motor current
+(:class:`~spaceid_gym.arm.joint_sensors.ArmSensorModel`; its defaults and their basis there). True
+parameters: drawn around the URDF and a default friction (:mod:`spaceid_gym.arm.parameter_prior`).
 
 Frames and units: joint space only; rad, rad/s, rad/s^2, N m, A, s; gravity is the robot's
 (``ArmRobot.gravity_m_s2``, base frame).
@@ -62,7 +55,6 @@ Frames and units: joint space only; rad, rad/s, rad/s^2, N m, A, s; gravity is t
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -80,9 +72,9 @@ from spaceid_gym.arm.chain_dynamics import (
     servo_sample,
 )
 from spaceid_gym.arm.friction import FrictionModel
-from spaceid_gym.arm.joint_log import EFFORT_KINDS, ArmLog
-from spaceid_gym.arm.real_logs import UR5_TORQUE_CONSTANTS_NM_A
-from spaceid_gym.arm.regressor import ArmRegressor, BaseParameterSet
+from spaceid_gym.arm.joint_log import ArmLog
+from spaceid_gym.arm.joint_sensors import ArmSensorModel
+from spaceid_gym.arm.regressor import ArmRegressor
 from spaceid_gym.arm.robot import ArmRobot
 from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
@@ -94,103 +86,6 @@ Reference = Callable[[FloatArray], tuple[FloatArray, FloatArray, FloatArray]]
 INTERNAL_RATE_HZ = 1000.0
 #: Default sample rate of the log, Hz (the UR5 CB-series controller's 8 ms cycle).
 SAMPLE_RATE_HZ = 125.0
-
-#: Default friction as fractions of each joint's torque limit (ASSUMPTION, not UR data: a few per cent of
-#: the rated torque is typical of harmonic-drive joints). Viscous: ``VISCOUS_FRACTION * limit / rate limit``.
-COULOMB_FRACTION = 0.05
-VISCOUS_FRACTION = 0.03
-STRIBECK_FRACTION_OF_COULOMB = 0.3
-#: the default asymmetric Coulomb friction: (1 + a) and (1 - a) times the Coulomb level in the + and - directions
-COULOMB_ASYMMETRY = 0.3
-
-
-# ---------------------------------------------------------------------- sensors
-@dataclass(frozen=True)
-class ArmSensorModel:
-    """White measurement noise of the joint sensors (defaults and their basis: module docstring).
-
-    Attributes:
-        q_std_rad: joint-angle (encoder) noise std, rad.
-        dq_std_rad_s: joint-rate noise std, rad/s.
-        current_std_A: motor-current noise std, A, one value or one per joint.
-        effort_kind: what the log holds, ``"torque_Nm"`` (``u``) or ``"current_A"`` (``u / k_t``).
-        torque_constants_Nm_A: ``k_t`` per joint (torque per current, gear included), N m/A; default
-            the UR5's approximate values. The torque noise std is ``current_std_A * k_t`` in both kinds.
-    """
-
-    q_std_rad: float = 1e-5
-    dq_std_rad_s: float = 2e-3
-    current_std_A: float | tuple[float, ...] = 0.07
-    effort_kind: str = "torque_Nm"
-    torque_constants_Nm_A: tuple[float, ...] = UR5_TORQUE_CONSTANTS_NM_A
-
-    def __post_init__(self) -> None:
-        for name in ("q_std_rad", "dq_std_rad_s", "current_std_A"):
-            value = np.asarray(getattr(self, name), dtype=float)
-            if value.ndim > 1 or not (np.isfinite(value).all() and (value >= 0).all()):
-                raise SpaceIdInputError(f"sensors: {name} must be finite and >= 0, got {getattr(self, name)!r}")
-        if self.effort_kind not in EFFORT_KINDS:
-            raise SpaceIdInputError(f"sensors: effort_kind must be one of {sorted(EFFORT_KINDS)}, got {self.effort_kind!r}")
-        k_t = np.asarray(self.torque_constants_Nm_A, dtype=float)
-        if k_t.ndim != 1 or not (np.isfinite(k_t).all() and (k_t > 0).all()):
-            raise SpaceIdInputError(
-                f"sensors: torque_constants_Nm_A must be positive numbers, got {self.torque_constants_Nm_A!r}"
-            )
-
-    @classmethod
-    def noise_free(cls, effort_kind: str = "torque_Nm", torque_constants_Nm_A: Sequence[float] | None = None) -> ArmSensorModel:
-        """Exact measurements (the torque constants still convert torque to current)."""
-        k_t = UR5_TORQUE_CONSTANTS_NM_A if torque_constants_Nm_A is None else tuple(float(k) for k in torque_constants_Nm_A)
-        return cls(q_std_rad=0.0, dq_std_rad_s=0.0, current_std_A=0.0, effort_kind=effort_kind, torque_constants_Nm_A=k_t)
-
-    def check(self, n_joints: int) -> None:
-        """Raise if the per-joint settings do not have ``n_joints`` entries."""
-        if len(self.torque_constants_Nm_A) != n_joints:
-            raise SpaceIdInputError(
-                f"sensors: torque_constants_Nm_A has {len(self.torque_constants_Nm_A)} values, the robot {n_joints} joints"
-            )
-        if np.ndim(self.current_std_A) == 1 and len(self.current_std_A) != n_joints:  # type: ignore[arg-type]
-            raise SpaceIdInputError(f"sensors: current_std_A has {len(self.current_std_A)} values, the robot {n_joints} joints")  # type: ignore[arg-type]
-
-    @property
-    def k_t(self) -> FloatArray:
-        """Torque constants, shape (n,), N m/A."""
-        return np.asarray(self.torque_constants_Nm_A, dtype=float)
-
-    def torque_std_Nm(self) -> FloatArray:
-        """Torque-equivalent noise std per joint, ``current_std_A * k_t``, shape (n,), N m."""
-        return np.asarray(self.current_std_A, dtype=float) * self.k_t
-
-    def effort_std(self) -> FloatArray:
-        """Noise std of the logged effort per joint (N m or A, see ``effort_kind``), shape (n,)."""
-        return self.torque_std_Nm() if self.effort_kind == "torque_Nm" else np.broadcast_to(self.current_std_A, self.k_t.shape)
-
-    def effort_from_torque(self, tau_Nm: FloatArray) -> FloatArray:
-        """The noise-free effort for motor torques of shape (..., n): the torque, or the current ``tau / k_t``."""
-        return np.asarray(tau_Nm, dtype=float) if self.effort_kind == "torque_Nm" else np.asarray(tau_Nm) / self.k_t
-
-    def measure(
-        self, q_rad: FloatArray, dq_rad_s: FloatArray, tau_Nm: FloatArray, rng: np.random.Generator
-    ) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """Measured ``(q, dq, effort)`` for true values of shape (..., n); one draw of shape (..., 3, n) from ``rng``."""
-        q = np.asarray(q_rad, dtype=float)
-        noise = rng.standard_normal((*q.shape[:-1], 3, q.shape[-1]))
-        return (
-            q + self.q_std_rad * noise[..., 0, :],
-            np.asarray(dq_rad_s, dtype=float) + self.dq_std_rad_s * noise[..., 1, :],
-            self.effort_from_torque(tau_Nm) + self.effort_std() * noise[..., 2, :],
-        )
-
-    def as_dict(self) -> dict[str, Any]:
-        """The settings for ``truth.json`` (torque std derived)."""
-        return {
-            "q_std_rad": float(self.q_std_rad),
-            "dq_std_rad_s": float(self.dq_std_rad_s),
-            "current_std_A": np.broadcast_to(np.asarray(self.current_std_A, dtype=float), self.k_t.shape).tolist(),
-            "torque_std_Nm": np.broadcast_to(self.torque_std_Nm(), self.k_t.shape).tolist(),
-            "effort_kind": self.effort_kind,
-            "torque_constants_Nm_A": list(self.torque_constants_Nm_A),
-        }
 
 
 # ---------------------------------------------------------------------- controller
@@ -254,110 +149,6 @@ class ArmSimulation:
     truth: dict[str, Any]
 
 
-# ---------------------------------------------------------------------- true parameters
-def default_friction_coefficients(robot: ArmRobot, friction: FrictionModel | Sequence[str] | None) -> FloatArray:
-    """Friction coefficients of the assumed default, shape (n, k) in the model's term order.
-
-    Coulomb ``COULOMB_FRACTION * torque limit`` (N m), viscous ``VISCOUS_FRACTION * torque limit /
-    rate limit`` (N m s/rad), Stribeck excess ``STRIBECK_FRACTION_OF_COULOMB * coulomb`` (N m),
-    offset 0; asymmetric Coulomb ``(1 +- COULOMB_ASYMMETRY) * coulomb`` in the + and - directions. For the UR5: 7.5 / 1.4 N m and 1.43 / 0.27 N m s/rad on the 150 / 28 N m joints.
-    """
-    model = FrictionModel.coerce(friction)
-    coulomb = COULOMB_FRACTION * robot.torque_limit_Nm
-    values = {
-        "coulomb": coulomb,
-        "viscous": VISCOUS_FRACTION * robot.torque_limit_Nm / robot.dq_limit_rad_s,
-        "stribeck": STRIBECK_FRACTION_OF_COULOMB * coulomb,
-        "offset": np.zeros(robot.n_joints),
-        "coulomb_positive": (1.0 + COULOMB_ASYMMETRY) * coulomb,
-        "coulomb_negative": (1.0 - COULOMB_ASYMMETRY) * coulomb,
-    }
-    return np.stack([values[c] for c in model.columns], axis=1) if model.terms else np.zeros((robot.n_joints, 0))
-
-
-def nominal_parameters(regressor: ArmRegressor) -> FloatArray:
-    """The URDF's inertial parameters and the default friction (:func:`default_friction_coefficients`), shape (p,)."""
-    p = regressor.nominal_parameters()
-    p[regressor.n_inertial :] = default_friction_coefficients(regressor.robot, regressor.friction).ravel()
-    return p
-
-
-@dataclass(frozen=True)
-class ParameterPrior:
-    """The distribution true parameters are drawn from (:meth:`draw`) around the URDF and default friction.
-
-    Per body (nominal mass ``m``, CoM ``c`` in the body frame, inertia ``I_C`` about the CoM):
-    ``m' = m (1 + e_m)``, ``c' = c + d``, ``I_C' = I_C (1 + e_I) m'/m``, with ``e_m, e_I ~ U(-s, s)``
-    (``s = relative_spread``) and each component of ``d ~ U(-com_spread_m, com_spread_m)``: always
-    physically consistent. Friction coefficients ``f' = f_default (1 + e_f)``, ``e_f ~ U(-s_f, s_f)``.
-
-    Attributes:
-        relative_spread: ``s`` (default 0.1).
-        com_spread_m: CoM shift half-range per axis, m (default 0.01).
-        friction_spread: ``s_f`` (default 0.5).
-    """
-
-    relative_spread: float = 0.1
-    com_spread_m: float = 0.01
-    friction_spread: float = 0.5
-
-    def __post_init__(self) -> None:
-        for name in ("relative_spread", "com_spread_m", "friction_spread"):
-            value = getattr(self, name)
-            if not (np.isfinite(value) and 0.0 <= value < (1.0 if name != "com_spread_m" else np.inf)):
-                raise SpaceIdInputError(f"parameter prior: {name} must be in [0, 1) (com_spread_m >= 0), got {value!r}")
-
-    def draw(self, regressor: ArmRegressor, rng: np.random.Generator) -> FloatArray:
-        """True parameters ``p`` (regressor order), shape (p,); 5 draws per body then one per friction coefficient."""
-        n = regressor.n_joints
-        z = rng.uniform(-1.0, 1.0, size=(n, 5)) * self._half_widths()
-        friction = default_friction_coefficients(regressor.robot, regressor.friction)
-        e_f = rng.uniform(-self.friction_spread, self.friction_spread, size=friction.shape)
-        return np.concatenate(
-            [*(_body_parameters(regressor.robot.model.inertias[k + 1], z[k]) for k in range(n)), (friction * (1 + e_f)).ravel()]
-        )
-
-    def parameter_std(self, regressor: ArmRegressor) -> FloatArray:
-        """Exact std of each drawn parameter, shape (p,).
-
-        A body's parameters are polynomials of degree <= 2 in each of its five independent uniform
-        perturbations, so their mean and variance are exact on a Gauss-Legendre tensor grid of 3
-        nodes per perturbation (exact to degree 5 per variable); friction coefficients are linear
-        in theirs (``U(-a, a)`` has std ``a / sqrt(3)``).
-        """
-        nodes = np.sqrt(0.6) * np.array([-1.0, 0.0, 1.0])
-        weights = np.array([5.0, 8.0, 5.0]) / 18.0  # Gauss-Legendre weights / 2: the U(-1, 1) density
-        grid = np.stack(np.meshgrid(*[nodes] * 5, indexing="ij"), axis=-1).reshape(-1, 5) * self._half_widths()
-        grid_weights = np.prod(np.stack(np.meshgrid(*[weights] * 5, indexing="ij"), axis=-1).reshape(-1, 5), axis=1)
-        out = []
-        for k in range(regressor.n_joints):
-            values = np.array([_body_parameters(regressor.robot.model.inertias[k + 1], z) for z in grid])  # (243, 10)
-            mean = grid_weights @ values
-            out.append(np.sqrt(np.maximum(grid_weights @ (values - mean) ** 2, 0.0)))
-        friction = default_friction_coefficients(regressor.robot, regressor.friction)
-        out.append((np.abs(friction) * self.friction_spread / math.sqrt(3.0)).ravel())
-        return np.concatenate(out)
-
-    def _half_widths(self) -> FloatArray:
-        """Half-widths of the five body perturbations ``(e_m, d_x, d_y, d_z, e_I)``."""
-        return np.array([self.relative_spread, self.com_spread_m, self.com_spread_m, self.com_spread_m, self.relative_spread])
-
-    def base_parameter_std(self, regressor: ArmRegressor, base: BaseParameterSet) -> FloatArray:
-        """Prior std of each base parameter ``beta = K p`` (parameters taken independent), shape (r,), floored at 1e-12."""
-        return np.maximum(np.sqrt((base.K**2) @ self.parameter_std(regressor) ** 2), 1e-12)
-
-    def as_dict(self) -> dict[str, float]:
-        """The settings for ``truth.json``."""
-        return dataclasses.asdict(self)
-
-
-def _body_parameters(nominal: pin.Inertia, z: FloatArray) -> FloatArray:
-    """Dynamic parameters (10,) of a body perturbed by ``z = (e_m, d_x, d_y, d_z, e_I)`` (see :class:`ParameterPrior`)."""
-    scale = 1.0 + z[0]
-    inertia = pin.Inertia(nominal.mass * scale, nominal.lever + z[1:4], nominal.inertia * (1.0 + z[4]) * scale)
-    return inertia.toDynamicParameters()
-
-
 # ---------------------------------------------------------------------- simulator
 class ArmSimulator:
     """Forward dynamics of a fixed-base arm with friction under a tracking controller (module docstring).
@@ -399,7 +190,7 @@ class ArmSimulator:
             )
         p.flags.writeable = False
         self.parameters = p
-        self.sensors = _sensor_model(sensors)
+        self.sensors = ArmSensorModel.coerce(sensors)
         self.sensors.check(n)
         for name, rate in (("internal_rate_hz", internal_rate_hz), ("sample_rate_hz", sample_rate_hz)):
             if not (np.isfinite(rate) and rate > 0):
@@ -628,13 +419,3 @@ class ArmSimulator:
             "internal_rate_hz": self.sample_rate_hz * self.steps_per_sample,
             "integrator": "rk4",
         }
-
-
-def _sensor_model(sensors: ArmSensorModel | str | None) -> ArmSensorModel:
-    if sensors is None:
-        return ArmSensorModel()
-    if isinstance(sensors, ArmSensorModel):
-        return sensors
-    if sensors == "noise_free":
-        return ArmSensorModel.noise_free()
-    raise SpaceIdInputError(f"sensors: expected an ArmSensorModel, None or 'noise_free', got {sensors!r}")

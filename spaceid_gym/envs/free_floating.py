@@ -12,7 +12,8 @@ from gymnasium import spaces
 from numpy.typing import NDArray
 
 from spaceid_gym.arrays import FloatArray
-from spaceid_gym.effects import HiddenEffects, parse_effect_spec, parse_hidden_effects
+from spaceid_gym.effects.settings import HiddenEffects
+from spaceid_gym.effects.spec_strings import parse_effect_spec, parse_hidden_effects
 from spaceid_gym.envs.actions import checked_action
 from spaceid_gym.envs.render import RobotRenderer, base_half_extents_from_inertia
 from spaceid_gym.errors import SpaceIdInputError
@@ -25,7 +26,8 @@ from spaceid_gym.physics.momentum import base_parameter_directions, twist_parame
 from spaceid_gym.robots import Robot, load_robot
 from spaceid_gym.sim.recorder import LogRecorder
 from spaceid_gym.sim.sensors import Measurement, SensorModel
-from spaceid_gym.sim.simulator import FreeFloatingSimulator, FreeFloatingState
+from spaceid_gym.sim.simulator import FreeFloatingSimulator
+from spaceid_gym.sim.state import FreeFloatingState
 
 #: the default identification window: 3000 steps, 60 s at 50 Hz (the registered ``max_episode_steps``)
 WINDOW_STEPS = 3000

@@ -15,9 +15,11 @@ from threadpoolctl import threadpool_limits
 
 from spaceid_gym.arm.friction import FrictionModel
 from spaceid_gym.arm.joint_log import ArmLog
+from spaceid_gym.arm.joint_sensors import ArmSensorModel
+from spaceid_gym.arm.parameter_prior import ParameterPrior, nominal_parameters
 from spaceid_gym.arm.regressor import ArmRegressor, BaseParameterSet
 from spaceid_gym.arm.robot import ArmRobot, load_arm
-from spaceid_gym.arm.torque_simulator import ArmSensorModel, ArmSimulator, ParameterPrior, TrackingController, nominal_parameters
+from spaceid_gym.arm.torque_simulator import ArmSimulator, TrackingController
 from spaceid_gym.arrays import FloatArray
 from spaceid_gym.envs.actions import checked_action
 from spaceid_gym.errors import SpaceIdInputError
@@ -91,7 +93,7 @@ class ManipulatorIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
 
     * information gain = ``0.5 (log det F_t - log det F_{t-1})`` (nats), ``F`` the accumulated
       Fisher information of the torque measurements about the base parameters in units of their
-      prior std (:class:`~spaceid_gym.arm.torque_simulator.ParameterPrior`), starting from the prior
+      prior std (:class:`~spaceid_gym.arm.parameter_prior.ParameterPrior`), starting from the prior
       ``F_0 = I``: each step adds ``J^T J`` with ``J = Y_b(q, dq, ddq) S / sigma`` (rows divided by
       each joint's torque noise std, ``S = diag(prior std)``), at the true state of the sample.
       Summed over an episode it is ``0.5 log det F_T``. With ``sensors="noise_free"`` the default
@@ -122,8 +124,8 @@ class ManipulatorIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     12 s of random commands the joint angles differ from a 4 kHz run by 1.1e-6 rad, a tenth of the
     encoder noise (1 kHz: 5e-8 rad); at any rate every sample satisfies ``u = Y(q, dq, ddq) p``
     exactly; :mod:`spaceid_gym.arm.torque_simulator` uses 1 kHz for datasets),
-    ``sensors`` (:class:`~spaceid_gym.arm.torque_simulator.ArmSensorModel`, ``None`` for defaults, or
-    ``"noise_free"``), ``prior`` (:class:`~spaceid_gym.arm.torque_simulator.ParameterPrior`),
+    ``sensors`` (:class:`~spaceid_gym.arm.joint_sensors.ArmSensorModel`, ``None`` for defaults, or
+    ``"noise_free"``), ``prior`` (:class:`~spaceid_gym.arm.parameter_prior.ParameterPrior`),
     ``controller`` (:class:`~spaceid_gym.arm.torque_simulator.TrackingController`), ``reward_weights``
     (:class:`ManipulatorRewardWeights`), ``base_parameters`` (a
     :class:`~spaceid_gym.arm.regressor.BaseParameterSet`; default computed from 300 random states

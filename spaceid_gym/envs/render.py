@@ -10,7 +10,7 @@ Frames and units
   joint's frame (the URDF root link's frame, for the shipped robots at the base box's geometric
   centre). Lengths in m, angles in the figure text in degrees.
 * ``q_full`` is pinocchio's configuration ``[p_wb (3), quat_wb (x, y, z, w) (4), q_arm (n)]``,
-  e.g. :meth:`spaceid_gym.sim.simulator.FreeFloatingState.pinocchio_configuration`.
+  e.g. :meth:`spaceid_gym.sim.state.FreeFloatingState.pinocchio_configuration`.
 
 What is drawn
 -------------

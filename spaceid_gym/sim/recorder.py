@@ -7,7 +7,7 @@ import numpy as np
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.log import MeasurementLog
 from spaceid_gym.sim.sensors import Measurement, Sampler, SensorModel
-from spaceid_gym.sim.simulator import FreeFloatingState
+from spaceid_gym.sim.state import FreeFloatingState
 
 
 class LogRecorder:

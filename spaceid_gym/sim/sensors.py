@@ -48,7 +48,7 @@ from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.sim.attitude_filter import AttitudeFilter, filter_gain, filter_time_constant_s, steady_state_error_std_rad
 from spaceid_gym.sim.lie import quat_from_matrix, quat_from_rotation_vector, quat_multiply
-from spaceid_gym.sim.simulator import FreeFloatingState
+from spaceid_gym.sim.state import FreeFloatingState
 
 #: one arcsecond in rad
 ARCSEC_RAD = math.pi / (180.0 * 3600.0)

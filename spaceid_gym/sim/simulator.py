@@ -49,19 +49,17 @@ from __future__ import annotations
 
 import itertools
 from collections import deque
-from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
-from numba import njit
 
 from spaceid_gym.arrays import FloatArray
-from spaceid_gym.effects import HiddenEffects
+from spaceid_gym.effects.settings import HiddenEffects
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.physics.inertia import RigidBodyInertia
-from spaceid_gym.physics.momentum import momentum_world_to_base
 from spaceid_gym.robots.robot import Robot
-from spaceid_gym.sim.lie import dexp_inv, quat_from_matrix, so3_exp
+from spaceid_gym.sim.attitude_step import BaseTerms, base_twist_at_attitude, rkmk4_attitude
+from spaceid_gym.sim.lie import dexp_inv, so3_exp
 from spaceid_gym.sim.servo import RateServo, default_servo
 from spaceid_gym.sim.slosh import (
     base_without_slosh,
@@ -71,74 +69,7 @@ from spaceid_gym.sim.slosh import (
     slosh_base_twist,
     slosh_body,
 )
-
-
-@dataclass
-class FreeFloatingState:
-    """Instantaneous state of the free-floating robot.
-
-    Attributes:
-        t_s: time (s).
-        rot_wb: base attitude, base-to-inertial rotation matrix (3, 3).
-        p_wb_m: base origin in the inertial frame (3,), m.
-        q_rad, dq_rad_s: arm joint angles and rates (n,).
-        ddq_rad_s2: arm joint accelerations (n,) just before ``t_s``.
-        v_base_body: base twist ``[v_lin; omega]`` in base axes (6,), m/s and rad/s.
-        composite_inertia: the whole robot's spatial inertia in the base frame (``H_bb``).
-        slosh_m, slosh_rate_m_s: slosh mass displacement from its rest point and its rate (3,),
-            base axes, m and m/s; ``None`` without slosh. Truth only: never measured. For the spring
-            model they are the slosh joint coordinates.
-        slosh_angles_rad, slosh_angle_rates_rad_s: the pendulum's two hinge angles and their rates
-            (2,), rad and rad/s (its joint coordinates); ``None`` otherwise.
-    """
-
-    t_s: float
-    rot_wb: FloatArray
-    p_wb_m: FloatArray
-    q_rad: FloatArray
-    dq_rad_s: FloatArray
-    ddq_rad_s2: FloatArray
-    v_base_body: FloatArray
-    composite_inertia: pin.Inertia
-    slosh_m: FloatArray | None = None
-    slosh_rate_m_s: FloatArray | None = None
-    slosh_angles_rad: FloatArray | None = None
-    slosh_angle_rates_rad_s: FloatArray | None = None
-
-    @property
-    def slosh_coordinates(self) -> tuple[FloatArray, FloatArray] | None:
-        """The slosh joints' coordinates and rates: ``(slosh_m, slosh_rate_m_s)`` for the spring model, the
-        hinge angles and their rates for the pendulum; ``None`` without slosh."""
-        if self.slosh_angles_rad is not None and self.slosh_angle_rates_rad_s is not None:
-            return self.slosh_angles_rad, self.slosh_angle_rates_rad_s
-        if self.slosh_m is not None and self.slosh_rate_m_s is not None:
-            return self.slosh_m, self.slosh_rate_m_s
-        return None
-
-    @property
-    def omega_base_body(self) -> FloatArray:
-        """Base angular velocity in the base body frame (3,), rad/s (what a gyro measures)."""
-        return self.v_base_body[3:]
-
-    @property
-    def quat_wb(self) -> FloatArray:
-        """Base attitude quaternion, scalar first ``[w, x, y, z]``, base-to-inertial."""
-        return quat_from_matrix(self.rot_wb)
-
-    def pinocchio_configuration(self) -> FloatArray:
-        """pinocchio ``q``: ``[p (3), quat (x, y, z, w), q_arm]`` (+ the slosh coordinates with slosh)."""
-        w, x, y, z = self.quat_wb
-        slosh = self.slosh_coordinates
-        if slosh is None:
-            return np.concatenate((self.p_wb_m, [x, y, z, w], self.q_rad))
-        return np.concatenate((self.p_wb_m, [x, y, z, w], self.q_rad, slosh[0]))
-
-    def pinocchio_velocity(self) -> FloatArray:
-        """pinocchio ``v``: ``[v_lin_body, omega_body, dq]`` (+ the slosh rates with slosh)."""
-        slosh = self.slosh_coordinates
-        if slosh is None:
-            return np.concatenate((self.v_base_body, self.dq_rad_s))
-        return np.concatenate((self.v_base_body, self.dq_rad_s, slosh[1]))
+from spaceid_gym.sim.state import FreeFloatingState
 
 
 class FreeFloatingSimulator:
@@ -440,66 +371,6 @@ class FreeFloatingSimulator:
         return self._com0_world + self.momentum_world[:3] * (t_s / self.total_mass_kg)
 
 
-#: ``(composite inertia, its inverse (6, 6), H_bm dq (6,), system CoM in base frame (3,), in inertial frame (3,))``
-BaseTerms = tuple[pin.Inertia, FloatArray, FloatArray, FloatArray, FloatArray]
-
-
 def _rk4_sum(h: float, k: list[FloatArray]) -> FloatArray:
     """``h/6 (k1 + 2 k2 + 2 k3 + k4)``."""
     return (h / 6.0) * (k[0] + 2.0 * k[1] + 2.0 * k[2] + k[3])
-
-
-@njit(cache=True)
-def base_twist_at_attitude(
-    rot_wb: FloatArray,
-    momentum_world: FloatArray,
-    h_bb_inv: FloatArray,
-    arm: FloatArray,
-    com_base_m: FloatArray,
-    com_world_m: FloatArray,
-) -> FloatArray:
-    """Base twist ``[v; omega]`` (base axes) from ``H_bb v = h_base(R, p) - H_bm dq``, shape (6,).
-
-    The base position follows from the system CoM: ``p = c_world - R c_base``.
-    """
-    p = com_world_m - rot_wb @ com_base_m
-    return h_bb_inv @ (momentum_world_to_base(momentum_world, rot_wb, p) - arm)
-
-
-@njit(cache=True)
-def rkmk4_attitude(
-    rot0: FloatArray,
-    omega0: FloatArray,
-    h: float,
-    momentum_mid: FloatArray,
-    inv_mid: FloatArray,
-    arm_mid: FloatArray,
-    com_base_mid: FloatArray,
-    com_world_mid: FloatArray,
-    momentum_end: FloatArray,
-    inv_end: FloatArray,
-    arm_end: FloatArray,
-    com_base_end: FloatArray,
-    com_world_end: FloatArray,
-) -> FloatArray:
-    """One RKMK4 step of length ``h`` for the base attitude on SO(3).
-
-    ``R = R0 exp([theta]x)`` with ``d theta/dt = dexp^{-1}(theta, omega_base_body)``. The body rate
-    is ``omega0`` at the start; at ``t + h/2`` and ``t + h`` it follows from the system momentum and
-    the base terms there (:data:`BaseTerms`) and the stage attitude. Compiled with numba (it runs
-    every env step).
-    """
-    k1 = omega0.copy()
-    th2 = 0.5 * h * k1
-    k2 = dexp_inv(
-        th2, base_twist_at_attitude(rot0 @ so3_exp(th2), momentum_mid, inv_mid, arm_mid, com_base_mid, com_world_mid)[3:]
-    )
-    th3 = 0.5 * h * k2
-    k3 = dexp_inv(
-        th3, base_twist_at_attitude(rot0 @ so3_exp(th3), momentum_mid, inv_mid, arm_mid, com_base_mid, com_world_mid)[3:]
-    )
-    th4 = h * k3
-    k4 = dexp_inv(
-        th4, base_twist_at_attitude(rot0 @ so3_exp(th4), momentum_end, inv_end, arm_end, com_base_end, com_world_end)[3:]
-    )
-    return rot0 @ so3_exp((h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4))

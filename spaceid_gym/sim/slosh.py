@@ -12,7 +12,7 @@ import pinocchio as pin
 from numba import njit
 
 from spaceid_gym.arrays import FloatArray
-from spaceid_gym.effects import HiddenEffects
+from spaceid_gym.effects.settings import HiddenEffects
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.physics.inertia import RigidBodyInertia, point_mass_inertia
 from spaceid_gym.physics.momentum import momentum_world_to_base
