@@ -12,15 +12,14 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from estimators.diagnostics.matrix import run_matrix, write_matrix
 from estimators.diagnostics.suite import (
     DIAGNOSTIC_EXCITATION,
     SUITE_EFFECTS,
     code_version,
     failed_rows,
     parse_magnitudes,
-    run_matrix,
     run_suite,
-    write_matrix,
     write_suite,
 )
 from estimators.evaluation import (

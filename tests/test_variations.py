@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from suite_rows import diagnosed_row
 
-from estimators.diagnostics import suite
+from estimators.diagnostics import matrix, suite
 from estimators.diagnostics.power import expected_power, power_of
 from estimators.problem import IdentificationModel
 from spaceid_gym.cli import main
@@ -144,7 +144,7 @@ def test_the_expected_power_rises_with_the_effect_and_is_alpha_without_it() -> N
 
 
 def _matrix_row(effect: str, seed: int, duration_s: float = 60.0, fixed: dict[str, Any] | None = None) -> dict[str, Any]:
-    """A row as :func:`suite.guarded_variation` returns it, without the simulation: the drawn case's cells, a power
+    """A row as :func:`matrix.guarded_variation` returns it, without the simulation: the drawn case's cells, a power
     of 0.95 on even seeds (0.5 on odd), the verdict right except on seed 2, an error on seed 3."""
     case = draw_variation(effect, seed, fixed)
     row = {"effect": effect, "seed": seed, **case.axes(), "magnitude": case.magnitude or math.nan, "fuel_consumed_kg": 1.0}
@@ -158,7 +158,7 @@ def _matrix_row(effect: str, seed: int, duration_s: float = 60.0, fixed: dict[st
 def test_the_matrix_counts_eligible_logs_writes_every_row_and_fails_on_an_error(
     monkeypatch: pytest.MonkeyPatch, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    monkeypatch.setattr(suite, "guarded_variation", _matrix_row)
+    monkeypatch.setattr(matrix, "guarded_variation", _matrix_row)
     code = main(
         ["diagnose-suite", "--matrix", "--seeds", "4", "--effects", "gyro_bias", "--fix", "robot=paper6", "--out", str(tmp_path)]
     )

@@ -31,7 +31,6 @@ from typing import Any
 import numpy as np
 
 from estimators.diagnostics.diagnose import NO_MISSING_EFFECT, diagnose
-from estimators.diagnostics.power import expected_power
 from estimators.diagnostics.workflow import ParameterErrors, apply_effect, parameter_errors
 from estimators.evaluation import Setting, draw_settings
 from estimators.problem import IdentificationModel
@@ -43,16 +42,6 @@ from spaceid_gym.excitation import FourierExcitation
 from spaceid_gym.executors import ExecutorSpec, run_jobs
 from spaceid_gym.files import write_csv_atomic, write_json_atomic, write_text_atomic
 from spaceid_gym.robots import Robot, load_robot
-from spaceid_gym.variations import (
-    AXES,
-    VariationCase,
-    axis_label,
-    axis_labels,
-    checked_fixed,
-    draw_variation,
-    simulate_variation,
-    truth_of,
-)
 from spaceid_gym.variations import DIAGNOSTIC_EXCITATION as VARIATION_DIAGNOSTIC_EXCITATION
 
 #: options of :class:`~spaceid_gym.excitation.FourierExcitation` for the suite (see the module docstring); defined with the
@@ -226,11 +215,6 @@ def _guarded_case_of(case: tuple[Any, ...]) -> dict[str, Any]:
     return guarded_case(*case)
 
 
-def _guarded_variation_of(case: tuple[Any, ...]) -> dict[str, Any]:
-    """:func:`guarded_variation` of one case's arguments (a job of :func:`run_matrix`)."""
-    return guarded_variation(*case)
-
-
 def code_version() -> str:
     """``git describe --always --dirty`` of the source tree the suite runs from, or ``"unknown"`` outside a git checkout
     (recorded in ``summary.json`` so each figure names the code that measured it)."""
@@ -260,10 +244,10 @@ def guarded_case(
     try:
         return run_case(robot_name, effect, seed, duration_s, magnitude)
     except Exception as exc:  # recorded in the row and reported by the command, not hidden
-        return {"effect": effect, "magnitude": _magnitude_cell(magnitude), "seed": seed, **_error_cells(exc)}
+        return {"effect": effect, "magnitude": _magnitude_cell(magnitude), "seed": seed, **error_cells(exc)}
 
 
-def _error_cells(exc: Exception) -> dict[str, Any]:
+def error_cells(exc: Exception) -> dict[str, Any]:
     """The cells of a log whose diagnosis raised ``exc``: the verdict ``error``, not correct, the exception and where."""
     frame = traceback.extract_tb(exc.__traceback__)[-1]
     where = f"{Path(frame.filename).name}:{frame.lineno} in {frame.name}"
@@ -335,10 +319,10 @@ def markdown_table(summary: list[dict[str, Any]]) -> str:
 def write_suite(out: str | Path, rows: list[dict[str, Any]], info: dict[str, Any]) -> dict[str, Path]:
     """``suite.csv``, ``summary.json`` and ``table.md`` in ``out``."""
     summary = summarise(rows)
-    return _write_run(Path(out), ("suite.csv", "table.md"), rows, summary, info, markdown_table(summary))
+    return write_run(Path(out), ("suite.csv", "table.md"), rows, summary, info, markdown_table(summary))
 
 
-def _write_run(
+def write_run(
     out: Path, names: tuple[str, str], rows: list[dict[str, Any]], summary: list[dict[str, Any]], info: dict[str, Any], table: str
 ) -> dict[str, Path]:
     """Write the rows (CSV, ``names[0]``), ``summary.json`` and the table (``names[1]``) in ``out``; their paths."""
@@ -354,162 +338,3 @@ def _csv_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Every row with every column (error rows have fewer, and an ``error``; empty where a row has none)."""
     columns = list(dict.fromkeys(key for row in rows for key in row))
     return [{c: row.get(c, "") for c in columns} for row in rows]
-
-
-# ---------------------------------------------------------------------- the variation matrix
-#: a log is *eligible* (its verdict counted in the matrix's figures) when the expected power of ``diagnose``'s test of
-#: its hidden effect is at least this (:func:`estimators.diagnostics.power.expected_power`); every clean log is
-ELIGIBLE_POWER = 0.9
-
-
-def run_variation(case: VariationCase, duration_s: float = 60.0) -> dict[str, Any]:
-    """Simulate the variation ``case`` (:func:`spaceid_gym.variations.simulate_variation`), compute the expected
-    power of its effect's test, diagnose it as :func:`run_case` does; one row: the case's cells
-    (:func:`_variation_cells`), ``expected_power`` (NaN for a clean log), the verdict columns of
-    :func:`diagnosed_cells` and ``wall_time_s``. A log whose power or diagnosis raises gives a row with the verdict
-    ``error`` (and the power when it was computed), as :func:`guarded_case`."""
-    start = time.perf_counter()
-    row = _variation_cells(case)
-    try:
-        env = simulate_variation(case, duration_s)
-        model = IdentificationModel(env.robot, "fuel")
-        clean = case.effect == NO_MISSING_EFFECT
-        row["expected_power"] = math.nan if clean else expected_power(model, case.effect, env.measurement_log(), truth_of(env))
-        row.update(diagnosed_cells(env, case.effect))
-    except Exception as exc:  # recorded in the row and reported by the command, not hidden
-        return {**row, **_error_cells(exc)}
-    row["wall_time_s"] = time.perf_counter() - start
-    return row
-
-
-def guarded_variation(effect: str, seed: int, duration_s: float = 60.0, fixed: dict[str, Any] | None = None) -> dict[str, Any]:
-    """:func:`run_variation` of the case of ``effect`` and ``seed`` (:func:`spaceid_gym.variations.draw_variation`,
-    ``fixed`` axes pinned); a draw that raises gives an ``error`` row too."""
-    try:
-        case = draw_variation(effect, seed, fixed)
-    except Exception as exc:  # recorded in the row and reported by the command, not hidden
-        return {"effect": effect, "seed": seed, **_error_cells(exc)}
-    return run_variation(case, duration_s)
-
-
-def _variation_cells(case: VariationCase) -> dict[str, Any]:
-    """A matrix row's first cells: the effect, the seed, every axis, the effect's size (its unit:
-    :data:`spaceid_gym.effects.MAGNITUDE_UNITS`; NaN when clean) and the fuel consumed (kg)."""
-    return {
-        "effect": case.effect,
-        "seed": case.seed,
-        **case.axes(),
-        "magnitude": math.nan if case.magnitude is None else case.magnitude,
-        "fuel_consumed_kg": case.fuel_consumed_kg,
-    }
-
-
-def run_matrix(
-    effects: tuple[str, ...] = SUITE_EFFECTS,
-    seeds: int = 20,
-    first_seed: int = 0,
-    executor: ExecutorSpec | None = None,
-    duration_s: float = 60.0,
-    fixed: dict[str, Any] | None = None,
-) -> list[dict[str, Any]]:
-    """The variation matrix: every effect x ``seeds`` seeds, each log's axes drawn from its seed (``fixed``: pinned,
-    checked before anything runs), each log a job on ``executor`` (default: serial); rows in a fixed order (effect,
-    seed), bit-identical whatever the executor. The same seed draws
-    the same axes and fuel state for every effect (paired logs)."""
-    pinned = checked_fixed(fixed)
-    cases = [(effect, first_seed + s, duration_s, pinned) for effect in effects for s in range(seeds)]
-    return run_jobs(_guarded_variation_of, cases, executor or ExecutorSpec("serial"), desc="variation matrix", unit="log")
-
-
-def summarise_matrix(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Per effect, per axis (``all`` first: every log), per axis value (a continuous axis's bin,
-    :func:`spaceid_gym.variations.axis_label`): ``logs``; ``eligible``: logs whose expected power is at least
-    :data:`ELIGIBLE_POWER` (a clean log: every one; a log whose power is unknown, not); ``correct``: eligible logs whose
-    verdict names the hidden effect (clean logs: ``none``), ``correct_percent`` of the eligible (NaN without any);
-    ``rms_over_noise_after_mean`` over the correct ones; ``wall_time_s_mean`` over the logs that ran."""
-    out = []
-    for effect in dict.fromkeys(r["effect"] for r in rows):
-        group = [r for r in rows if r["effect"] == effect]
-        out.append(_matrix_cell(effect, "all", "all", group))
-        for axis in AXES:
-            for value in axis_labels(axis):
-                cell = [r for r in group if axis_label(axis, r.get(axis)) == value]
-                if cell:
-                    out.append(_matrix_cell(effect, axis, value, cell))
-    return out
-
-
-def _eligible(row: dict[str, Any]) -> bool:
-    """Whether the row's verdict counts (see :func:`summarise_matrix`)."""
-    power = row.get("expected_power")
-    return row["effect"] == NO_MISSING_EFFECT or (power is not None and power >= ELIGIBLE_POWER)
-
-
-def _matrix_cell(effect: str, axis: str, value: str, rows: list[dict[str, Any]]) -> dict[str, Any]:
-    """One entry of :func:`summarise_matrix`."""
-    eligible = [r for r in rows if _eligible(r)]
-    correct = [r for r in eligible if r["correct"]]
-    ran = [r for r in rows if r["verdict"] != ERROR_VERDICT]
-    return {
-        "effect": effect,
-        "axis": axis,
-        "value": value,
-        "logs": len(rows),
-        "eligible": len(eligible),
-        "correct": len(correct),
-        "correct_percent": 100.0 * len(correct) / len(eligible) if eligible else math.nan,
-        "rms_over_noise_after_mean": float(np.mean([r["rms_over_noise_after"] for r in correct])) if correct else math.nan,
-        "rms_over_noise_after_max": float(np.max([r["rms_over_noise_after"] for r in correct])) if correct else math.nan,
-        "fuel_z_rms_after": _fuel_z_rms(correct),
-        "wall_time_s_mean": float(np.mean([r["wall_time_s"] for r in ran])) if ran else math.nan,
-    }
-
-
-def _fuel_z_rms(rows: list[dict[str, Any]]) -> float:
-    """The RMS over ``rows`` and the four fuel unknowns of the error after the verdict over its Cramér-Rao std
-    (``z_*_after``; 1 for an efficient, unbiased estimate); NaN without rows."""
-    z = np.array([[r[f"z_{name}_after"] for name in ("mdf", "bx", "by", "bz")] for r in rows], dtype=float)
-    return float(np.sqrt(np.nanmean(z**2))) if z.size and np.isfinite(z).any() else math.nan
-
-
-def _fraction_cell(entry: dict[str, Any] | None) -> str:
-    """``"correct/eligible (%)"``; ``"0/0"`` without eligible logs, empty without logs."""
-    if entry is None:
-        return ""
-    if not entry["eligible"]:
-        return "0/0"
-    return f"{entry['correct']}/{entry['eligible']} ({entry['correct_percent']:.0f} %)"
-
-
-def matrix_markdown(summary: list[dict[str, Any]]) -> str:
-    """The matrix summary as Markdown: every log per effect, then one block per axis (rows: the effects with logs
-    there; columns: the axis's values; cells ``correct/eligible (%)``)."""
-    entries = {(s["effect"], s["axis"], s["value"]): s for s in summary}
-    effects = list(dict.fromkeys(s["effect"] for s in summary))
-    lines = [
-        f"Eligible: expected power of the effect's test >= {ELIGIBLE_POWER:g} (clean logs: all); correct: the verdict "
-        "names the hidden effect (clean logs: none).",
-        "",
-        "| hidden effect | logs | eligible | correct | RMS/noise after: mean, max | fuel z RMS after | s/log |",
-        "|---|---|---|---|---|---|---|",
-    ]
-    for effect in effects:
-        s = entries[(effect, "all", "all")]
-        lines.append(
-            f"| {effect} | {s['logs']} | {s['eligible']} | {_fraction_cell(s)} | {s['rms_over_noise_after_mean']:.3f}, "
-            f"{s['rms_over_noise_after_max']:.3f} | {s['fuel_z_rms_after']:.2f} | {s['wall_time_s_mean']:.1f} |"
-        )
-    for axis in AXES:
-        labels = axis_labels(axis)
-        rows = [e for e in effects if any((e, axis, v) in entries for v in labels)]
-        if not rows:
-            continue
-        lines += ["", f"**{axis}**", "", f"| hidden effect | {' | '.join(labels)} |", "|---" * (len(labels) + 1) + "|"]
-        lines += [f"| {e} | {' | '.join(_fraction_cell(entries.get((e, axis, v))) for v in labels)} |" for e in rows]
-    return "\n".join(lines) + "\n"
-
-
-def write_matrix(out: str | Path, rows: list[dict[str, Any]], info: dict[str, Any]) -> dict[str, Path]:
-    """``matrix.csv`` (a row per log), ``summary.json`` (``info`` and :func:`summarise_matrix`) and ``matrix.md`` in ``out``."""
-    summary = summarise_matrix(rows)
-    return _write_run(Path(out), ("matrix.csv", "matrix.md"), rows, summary, info, matrix_markdown(summary))
