@@ -323,11 +323,13 @@ def test_a_fused_attitude_too_short_for_its_coupling_leaves_the_verdict_to_the_g
     assert "too short to fit its response to the gyro" in d.reason
 
 
-def test_a_strong_momentum_fitted_in_the_wrong_basin_is_restarted_globally() -> None:
+def test_a_strong_momentum_fitted_in_the_wrong_basin_is_refitted() -> None:
     """A 0.27 N m s momentum on the light quick3 (held-out matrix log, seed 8006): the candidate's local fits, from a
     baseline far off, stopped with the fuel's first moment mirrored (6.6 kg against 22.2 kg, residual 5.5 times the
-    noise). Restarted from global searches (its residual stayed above 1.5 times the white noise), the fit reaches
-    the truth's basin."""
+    noise). With the gyro weighted by the baseline's residual, the restart from global searches of the closest
+    candidate reached the truth's basin; with the gyro weighted by its white noise, the torque's fit reaches the noise
+    first (the closest candidate, not restarted) and the verdict was external_torque until the momentum was refitted
+    from the torque's fit restricted to its unknowns."""
     env = simulate_variation(draw_variation("initial_momentum", 8006), 60.0)
     log, truth = env.measurement_log(), truth_of(env)
     model = IdentificationModel(env.robot, "fuel")
