@@ -80,7 +80,8 @@ Physically consistent variant: ``consistent=True`` (either class) searches the l
 of the problem's :class:`~estimators.arm.consistency.PhysicalConsistency` (the box from
 :meth:`~estimators.arm.consistency.PhysicalConsistency.search_box`); the estimate's ``extra`` holds the
 consistent full parameters (``full_params``) and the estimate reports each link's consistency. Its ``polish``
-leaves the box and the log-Cholesky coordinates for a Newton descent in factor coordinates (``J = Y Y^T`` per link),
+leaves the box and the log-Cholesky coordinates for a trust-region Newton descent in factor coordinates (``J = Y Y^T``
+per link; :mod:`estimators.arm.consistent_polish`, deterministic),
 where every local minimum is the global consistent one: with it the colony ends at the cost of the convex ``sdp``
 estimator (:mod:`estimators.arm.sdp`), which every consistent fit reports its excess over.
 """
@@ -93,10 +94,9 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import least_squares, minimize
-from threadpoolctl import threadpool_limits
+from scipy.optimize import least_squares
 
-from estimators.arm.consistency import PhysicalConsistency
+from estimators.arm.consistent_polish import polished_consistent
 from estimators.arm.linear_problem import LinearIdentificationProblem
 from estimators.arm.sdp import excess_over_optimum
 from estimators.base import Estimator, SearchResult
@@ -189,75 +189,6 @@ def _polished(problem: Any, space: SearchSpace, start: FloatArray) -> FloatArray
 
 #: the most least-squares steps of ``polish`` in the search box (``consistent=False``)
 POLISH_ITERATIONS = 100
-#: the most Newton steps of ``polish`` in the factor coordinates (``consistent=True``), and its gradient tolerance
-#: (on the cost relative to the unconstrained least-squares minimum, per factor coordinate)
-CONSISTENT_POLISH_ITERATIONS = 500
-CONSISTENT_POLISH_GTOL = 1e-10
-#: the most exact trust-region steps after the Lanczos ones collapsed (enough to leave a saddle; on the real UR5 logs
-#: they mostly collapse at the optimum to rounding, 1e-5 of the cost, where more exact steps only cost time)
-CONSISTENT_POLISH_EXACT_ITERATIONS = 50
-#: friction roots of the polish's start are at least this (coefficient ``scale w^2`` >= 0.0025 of its search bound)
-POLISH_ROOT_FLOOR = 0.05
-
-
-def _polished_consistent(problem: Any, consistency: PhysicalConsistency, start: FloatArray) -> tuple[FloatArray, dict[str, Any]]:
-    """Consistent full parameters (n_full,) after a Newton descent from the search point ``start`` (n_full,), and its facts.
-
-    The cost ``c_ls + |A (K x(y) - theta_ls)|^2`` (root form) in the factor coordinates ``y`` of
-    :meth:`~estimators.arm.consistency.PhysicalConsistency.factor_from_search` (``J_hat = Y Y^T`` per link, friction
-    ``scale w^2``): every local minimum there is the global minimum over the consistent parameters, and the boundary
-    (a thin body, zero friction) lies at finite ``y``. A trust-region Newton method (``scipy.optimize.minimize``) with
-    the exact gradient ``2 G^T r`` and Hessian ``2 (G^T G + sum_c (K^T A^T r)_c d^2 x_c / dy^2)``, ``G = A K dx/dy``
-    (:meth:`~estimators.arm.consistency.PhysicalConsistency.factor_jacobian`, ``factor_curvature``): the second term, the
-    curvature of the map times the residual, is what Gauss-Newton (the ``consistent=False`` polish) leaves out and why
-    it crawls where the constraints hold the optimum away from the unconstrained one.
-
-    The trust-region subproblems are solved by the Lanczos method (``trust-krylov``: the same steps as an exact solve
-    here, at a tenth of the time). Stationary points that are not minima exist where a factor coordinate is exactly
-    zero: a friction coefficient on its bound (the colony's box clips to it) has ``w = 0``, zero gradient and no
-    coupling to the other coordinates, a direction the Lanczos steps never see (measured: one colony seed of 20
-    stopped 51 % above the optimum there). So friction roots start at least ``POLISH_ROOT_FLOOR``, and if the trust
-    region still collapses, the descent continues with at most ``CONSISTENT_POLISH_EXACT_ITERATIONS`` exact
-    trust-region steps (``trust-exact``, which follow negative curvature). The cost is divided by ``c_ls`` (relative units); each gradient counts D evaluations.
-    """
-    if not isinstance(problem, LinearIdentificationProblem):
-        raise SpaceIdInputError(
-            "polish=True: needs a linear problem (LinearIdentificationProblem); use 'hybrid' for nonlinear ones"
-        )
-    matrix, minimiser = problem.root_form()
-    data = matrix if consistency.base_map is None else matrix @ consistency.base_map
-    target = matrix @ minimiser
-    scale = max(float(problem.cost(minimiser, count=False)[0]), 1e-300)
-
-    def residual(y: FloatArray) -> FloatArray:
-        return data @ consistency.full_from_factor(y) - target
-
-    def cost(y: FloatArray) -> float:
-        problem.n_model_samples += problem.n_samples
-        r = residual(y)
-        value = float(r @ r) / scale
-        return value if np.isfinite(value) else np.inf  # a wild trial step: rejected by the trust region
-
-    def gradient(y: FloatArray) -> FloatArray:
-        problem.n_model_samples += len(y) * problem.n_samples
-        return 2.0 * (data @ consistency.factor_jacobian(y)).T @ residual(y) / scale
-
-    def hessian(y: FloatArray) -> FloatArray:
-        jacobian = data @ consistency.factor_jacobian(y)
-        return 2.0 * (jacobian.T @ jacobian + consistency.factor_curvature(data.T @ residual(y))) / scale
-
-    options = {"maxiter": CONSISTENT_POLISH_ITERATIONS, "gtol": CONSISTENT_POLISH_GTOL}
-    # 100-dimensional algebra: BLAS threads only contend on a busy machine; a wild trial step may overflow (rejected)
-    with threadpool_limits(limits=1), np.errstate(over="ignore", invalid="ignore"):
-        start_factor = consistency.factor_from_search(start, root_floor=POLISH_ROOT_FLOOR)
-        result = minimize(cost, start_factor, jac=gradient, hess=hessian, method="trust-krylov", options=options)
-        facts = {"polish_iterations": int(result.nit), "polish_converged": bool(result.success), "polish_restarted": False}
-        if result.status == 2:  # the trust region collapsed (a saddle the Lanczos steps do not leave): exact steps
-            options["maxiter"] = CONSISTENT_POLISH_EXACT_ITERATIONS
-            result = minimize(cost, result.x, jac=gradient, hess=hessian, method="trust-exact", options=options)
-            facts.update(polish_iterations=facts["polish_iterations"] + int(result.nit), polish_restarted=True)
-    facts["polish_converged"] = bool(result.success)
-    return consistency.full_from_factor(result.x), facts
 
 
 @dataclass
@@ -294,7 +225,8 @@ class ArtificialBeeColony(Estimator):
             in the budget's total but not limited by it (default False). Without ``consistent``: least squares in the
             search box (``scipy.optimize.least_squares``, trust region reflective, on the problem's
             :meth:`~estimators.arm.linear_problem.LinearIdentificationProblem.root_cost`). With ``consistent``: a Newton
-            descent over every consistent parameter set, not only the box (:func:`_polished_consistent`), which ends at
+            descent over every consistent parameter set, not only the box
+            (:func:`~estimators.arm.consistent_polish.polished_consistent`), which ends at
             the global consistent optimum the ``sdp`` estimator computes.
         seed: the generator's seed.
 
@@ -400,7 +332,7 @@ class ArtificialBeeColony(Estimator):
         if self.polish:
             extra["colony_cost"] = history[-1] if history else float(colony.cost[best])
             if self.consistent:
-                full, facts = _polished_consistent(problem, problem.consistency, x_best)
+                full, facts = polished_consistent(problem, problem.consistency, x_best)
                 theta = problem.consistency.theta_from_full(full)
                 extra.update(facts)
             else:
