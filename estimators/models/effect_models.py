@@ -146,6 +146,7 @@ class GyroBias(_VectorTerm):
 
     name = "gyro_bias"
     stage = "measurement"
+    additive = True
     unit, bound, prefix, typical = "rad_s", 0.05, "bias", 1e-3
 
     def measure(self, omega: FloatArray, theta: FloatArray, context: EffectContext) -> FloatArray:

@@ -206,6 +206,13 @@ class MomentumModel:
             return d_base, None
         return d_base, -angular @ (basis_twist @ to_base + momentum_map)
 
+    def arm_terms(self, with_payload: bool) -> tuple[FloatArray, ...]:
+        """The per-sample arrays of :func:`_base_twist` after the composite's own: the arm's first moment (T, 3),
+        inertia entries (T, 6) and momentum (T, 6), and the payload maps ``A_t`` (T, 10, 10) and ``G_t`` (T, 6, 10)
+        (placeholders without a payload)."""
+        maps = self._payload_maps() if with_payload else (np.zeros((1, 10, 10)), np.zeros((1, 6, 10)))
+        return self._first_moment, self._inertia6, self._momentum, *maps
+
     # ------------------------------------------------------------------ internals
     def _payload_maps(self) -> tuple[FloatArray, FloatArray]:
         """Per-sample ``A_t`` (T, 10, 10) and ``G_t`` (T, 6, 10) of the module docstring (computed once)."""
@@ -329,25 +336,53 @@ def _base_twist(
     comp = np.empty(10)
     for i in range(n_p):
         for t in range(n_t):
-            for k in range(10):
-                comp[k] = params10[i, k]
-            for k in range(6):
-                h[k] = momentum[t, k]
-            if with_payload:
-                _add_product(comp, to_base[t], payload10[i])
-                _add_product(h, momentum_map[t], payload10[i])
-            if with_extra:
-                for k in range(6):
-                    h[k] -= extra[i, t, k]
-            if with_moving:
-                for k in range(10):
-                    comp[k] += moving[i, t, k]
-            for k in range(6):
-                j[k] = comp[4 + k] + inertia6[t, k]
+            composite_at(
+                i, t, params10, payload10, with_payload, extra, with_extra, moving, with_moving, inertia6, momentum, to_base,
+                momentum_map, comp, h, j
+            )  # fmt: skip
             _twist_of_composite(
                 comp[0] + arm_mass, comp[1] + first[t, 0], comp[2] + first[t, 1], comp[3] + first[t, 2], j, h, out, i, t
             )
     return out
+
+
+@njit(cache=True, inline="always")
+def composite_at(
+    i: int,
+    t: int,
+    params10: FloatArray,
+    payload10: FloatArray,
+    with_payload: bool,
+    extra: FloatArray,
+    with_extra: bool,
+    moving: FloatArray,
+    with_moving: bool,
+    inertia6: FloatArray,
+    momentum: FloatArray,
+    to_base: FloatArray,
+    momentum_map: FloatArray,
+    comp: FloatArray,
+    h: FloatArray,
+    j: FloatArray,
+) -> None:
+    """The composite of parameter set ``i`` at sample ``t`` (see :func:`_base_twist`): its parameters without the arm
+    into ``comp`` (10,), the momentum it carries with the sign of ``h_arm`` into ``h`` (6,) and its inertia entries
+    with the arm's into ``j`` (6,)."""
+    for k in range(10):
+        comp[k] = params10[i, k]
+    for k in range(6):
+        h[k] = momentum[t, k]
+    if with_payload:
+        _add_product(comp, to_base[t], payload10[i])
+        _add_product(h, momentum_map[t], payload10[i])
+    if with_extra:
+        for k in range(6):
+            h[k] -= extra[i, t, k]
+    if with_moving:
+        for k in range(10):
+            comp[k] += moving[i, t, k]
+    for k in range(6):
+        j[k] = comp[4 + k] + inertia6[t, k]
 
 
 @njit(cache=True)
