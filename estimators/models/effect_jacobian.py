@@ -21,6 +21,7 @@ from __future__ import annotations
 from typing import Protocol
 
 import numpy as np
+from numpy.typing import NDArray
 
 from estimators.models.effect_base import EffectTerm
 from estimators.models.effect_models import EffectPrediction
@@ -56,21 +57,28 @@ def effect_jacobians(
     d_base, d_payload = params.composite_jacobian(theta)
     units = params.term_parts(np.eye(n_k))  # each term's part of each unit direction (k, k_e)
     parts = params.term_parts(row)
+    # the unknowns that move the base (the measurement terms' own only change the reading)
+    reading_only = np.zeros(n_k, dtype=bool)
+    for term in prediction.measurement_terms:
+        reading_only |= np.any(units[term] != 0.0, axis=1)
+    rotating = np.flatnonzero(~reading_only)
     extra, d_extra = None, None
     for term in prediction.momentum_terms:
         angular = term.angular_momentum(parts[term], context)[0]  # type: ignore[attr-defined]
-        d_angular = term.angular_momentum(np.ascontiguousarray(units[term]), context)  # type: ignore[attr-defined]
+        d_angular = term.angular_momentum(np.ascontiguousarray(units[term][rotating]), context)  # type: ignore[attr-defined]
         if extra is None:
-            extra, d_extra = np.zeros((model.n_samples, 6)), np.zeros((n_k, model.n_samples, 6))
+            extra, d_extra = np.zeros((model.n_samples, 6)), np.zeros((len(rotating), model.n_samples, 6))
         assert d_extra is not None
         extra[:, 3:] += angular
         d_extra[..., 3:] += d_angular
-    payload = None if payload10 is None else (payload10[0], None if d_payload is None else d_payload.T)
+    composite = (base10[0], d_base.T[rotating])
+    payload = None if payload10 is None else (payload10[0], None if d_payload is None else d_payload.T[rotating])
     if prediction.slosh is None:
-        twist, d_twist = _twist(model, (base10[0], d_base.T), payload, extra, d_extra)
+        twist, d_rotating = _twist(model, composite, payload, extra, d_extra)
     else:
-        twist, d_twist = _slosh_twist(prediction, params, theta, step, (base10[0], d_base.T), payload, extra, d_extra)
-    true, d_true = twist[None, :, 3:], np.ascontiguousarray(d_twist[..., 3:])
+        twist, d_rotating = _slosh_twist(prediction, params, theta, (rotating, step), composite, payload, extra, d_extra)
+    true, d_true = twist[None, :, 3:], np.zeros((n_k, model.n_samples, 3))
+    d_true[rotating] = d_rotating[..., 3:]
     measured, d_measured = true, d_true.copy()
     for term in prediction.measurement_terms:
         own = parts[term]
@@ -134,19 +142,21 @@ def _slosh_twist(
     prediction: EffectPrediction,
     params: EffectParameters,
     theta: FloatArray,
-    step: FloatArray,
+    directions: tuple[NDArray[np.intp], FloatArray],
     composite: tuple[FloatArray, FloatArray],
     payload: tuple[FloatArray, FloatArray | None] | None,
     extra: FloatArray | None,
     d_extra: FloatArray | None,
 ) -> tuple[FloatArray, FloatArray]:
-    """The twist (T, 6) with a slosh term and its derivatives (k, T, 6), as
-    :meth:`~estimators.models.effect_models.EffectPrediction._base_rate` computes the twist: the rest's twist, the
-    oscillator driven by it, the twist carrying the oscillator's momentum and displaced mass."""
+    """The twist (T, 6) with a slosh term and its derivatives (K, T, 6) along the K unknowns ``directions[0]`` (their
+    steps among the k of ``directions[1]``), as :meth:`~estimators.models.effect_models.EffectPrediction._base_rate`
+    computes the twist: the rest's twist, the oscillator driven by it, the twist carrying the oscillator's momentum
+    and displaced mass (``composite``, ``payload``, ``d_extra``: the derivatives along the same K)."""
     slosh = prediction.slosh
     assert slosh is not None
     model = prediction.momentum_model
-    n_k = theta.size
+    columns, all_steps = directions
+    n_k, step = len(columns), all_steps[columns]
 
     def per_fit(rows: FloatArray) -> FloatArray:
         """The oscillator's inputs for parameter vectors (P, k): (P, 34)."""
@@ -163,8 +173,8 @@ def _slosh_twist(
 
     points = np.repeat(theta[None], 2 * n_k, axis=0)
     index = np.arange(n_k)
-    points[2 * index, index] += step
-    points[2 * index + 1, index] -= step
+    points[2 * index, columns] += step
+    points[2 * index + 1, columns] -= step
     value = per_fit(theta[None])[0]
     shifted = per_fit(points)
     d_value = (shifted[0::2] - shifted[1::2]) / (2.0 * step[:, None])  # (k, 34)

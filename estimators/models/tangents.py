@@ -21,7 +21,7 @@ import numpy as np
 from numba import njit
 
 from estimators.models.mass_effects import _cross
-from estimators.models.momentum_model import _twist_of_composite, composite_at
+from estimators.models.momentum_model import composite_at, composite_inverse, twist_from_inverse
 from spaceid_gym.arrays import FloatArray
 
 
@@ -62,19 +62,23 @@ def twist_tangents(
     rhs = np.empty(6)
     d_j = np.empty(6)
     no_arm = np.zeros((n_t, 6))
+    # the directions along which the payload or the extra momentum change (elsewhere their products are zero)
+    payload_moves = np.array([with_payload and np.any(d_payload10[k] != 0.0) for k in range(n_k)])
+    extra_moves = np.array([with_extra and np.any(d_extra[k] != 0.0) for k in range(n_k)])
     for t in range(n_t):
         composite_at(
             0, t, params10, payload10, with_payload, extra, with_extra, moving, with_moving, inertia6, momentum, to_base,
             momentum_map, comp, h, j
         )  # fmt: skip
         mass, hx, hy, hz = comp[0] + arm_mass, comp[1] + first[t, 0], comp[2] + first[t, 1], comp[3] + first[t, 2]
-        _twist_of_composite(mass, hx, hy, hz, j, h, out, 0, t)
+        inverse = composite_inverse(mass, hx, hy, hz, (j[0], j[1], j[2], j[3], j[4], j[5]))
+        twist_from_inverse(mass, inverse, h, out, 0, t)
         vx, vy, vz, wx, wy, wz = out[0, t, 0], out[0, t, 1], out[0, t, 2], out[0, t, 3], out[0, t, 4], out[0, t, 5]
         for k in range(n_k):
             # the change of the composite and of the momentum it carries (no arm: its terms do not vary)
             composite_at(
-                k, t, d_params10, d_payload10, with_payload, d_extra, with_extra, d_moving, with_moving, no_arm, no_arm,
-                to_base, momentum_map, d_comp, rhs, d_j
+                k, t, d_params10, d_payload10, payload_moves[k], d_extra, extra_moves[k], d_moving, with_moving, no_arm,
+                no_arm, to_base, momentum_map, d_comp, rhs, d_j
             )  # fmt: skip
             # M dv = -(dh + dM v): solved as the twist of a composite carrying -(dh + dM v)
             dm, dhx, dhy, dhz = d_comp[0], d_comp[1], d_comp[2], d_comp[3]
@@ -87,7 +91,7 @@ def twist_tangents(
             rhs[3] += l_cross[0] + jxx * wx + jxy * wy + jxz * wz
             rhs[4] += l_cross[1] + jxy * wx + jyy * wy + jyz * wz
             rhs[5] += l_cross[2] + jxz * wx + jyz * wy + jzz * wz
-            _twist_of_composite(mass, hx, hy, hz, j, rhs, d_out, k, t)
+            twist_from_inverse(mass, inverse, rhs, d_out, k, t)
     return out[0], d_out
 
 
