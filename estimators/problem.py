@@ -27,6 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from estimators.estimate import Estimate
+from estimators.models.effect_jacobian import effect_jacobians
 from estimators.models.effect_models import EffectContext, EffectPrediction, make_terms, parse_effects
 from estimators.models.momentum_model import MomentumModel, Samples
 from estimators.parameters import FuelParameters, Parameterisation, WithEffects, make_parameterisation
@@ -39,6 +40,10 @@ from spaceid_gym.robots import Robot, load_robot
 
 #: a parameter is identifiable if its Cramér-Rao std is below this fraction of its search range
 IDENTIFIABLE_FRACTION = 0.25
+
+#: the central differences' step, as a fraction of each unknown's search width (:meth:`IdentificationProblem.difference_jacobian`;
+#: the per-fit quantities of the slosh's Jacobian, :func:`~estimators.models.effect_jacobian.effect_jacobians`)
+DIFFERENCE_STEP = 1e-6
 
 #: how many Jacobians a problem keeps, to answer a request at the same parameters again (:meth:`IdentificationProblem.jacobian`)
 REMEMBERED_JACOBIANS = 4
@@ -238,8 +243,8 @@ class IdentificationProblem:
         return base, gyro
 
     def rates_jacobian(self, theta: FloatArray, count: bool = True) -> tuple[FloatArray, FloatArray]:
-        """``d base_rate / d theta`` and ``d predict / d theta``, each (3T, k), at ``theta`` (k,), from one batched
-        evaluation of the central differences (:meth:`base_rate_jacobian`, :meth:`jacobian`)."""
+        """``d base_rate / d theta`` and ``d predict / d theta``, each (3T, k), at ``theta`` (k,), from one pass of the
+        analytic derivatives (:meth:`base_rate_jacobian`, :meth:`jacobian`)."""
         if self._effects is None:
             jac = self.jacobian(theta, count)
             return jac, jac
@@ -248,12 +253,14 @@ class IdentificationProblem:
 
     def _rates_jacobian(self, theta: FloatArray) -> FloatArray:
         """:meth:`rates_jacobian` stacked (6T, k), not counted."""
+        return np.vstack(self._effect_jacobians(theta))
 
-        def stacked(points: FloatArray, count: bool = False) -> FloatArray:
-            base, gyro = self.rates(points, count=count)
-            return np.concatenate((base, gyro), axis=1)  # (P, 2T, 3)
-
-        return self._difference_jacobian(theta, stacked)
+    def _effect_jacobians(self, theta: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """With effects: ``d base_rate / d theta`` and ``d predict / d theta`` (3T, k), analytic
+        (:func:`~estimators.models.effect_jacobian.effect_jacobians`), not counted."""
+        params = self.parameters
+        assert isinstance(params, WithEffects) and self._effects is not None
+        return effect_jacobians(self._effects, params, theta, DIFFERENCE_STEP * params.width)
 
     def gyro_error(self, theta: FloatArray) -> FloatArray:
         """What the measurement effects add to the base rate, ``omega_gyro - omega_base`` (T, 3), rad/s, at ``theta`` (k,).
@@ -302,14 +309,14 @@ class IdentificationProblem:
         return (self.predict(theta, count=count)[0] - self.measured).ravel()
 
     def jacobian(self, theta: FloatArray, count: bool = True) -> FloatArray:
-        """``d predicted / d theta`` (3T, k) at ``theta`` (k,), analytic (counted as k evaluations) or, with effects, by
-        central differences (:meth:`_difference_jacobian`, counted as 2k)."""
+        """``d predicted / d theta`` (3T, k) at ``theta`` (k,), analytic (counted as k evaluations; with effects as 2k,
+        what the central differences it replaced cost, so that budgets compare with earlier runs)."""
         return self._remembered("predict", np.asarray(theta, dtype=float), count, self._predict_jacobian)
 
     def _predict_jacobian(self, theta: FloatArray) -> FloatArray:
         """:meth:`jacobian`, not counted."""
         if self._effects is not None:
-            return self._difference_jacobian(theta, self.predict)
+            return self._effect_jacobians(theta)[1]
         base10, payload10 = self.parameters.composite(theta)
         d_base, d_payload = self.parameters.composite_jacobian(theta)
         j_base, j_payload = self.momentum.jacobian(base10[0], None if payload10 is None else payload10[0])
@@ -320,7 +327,7 @@ class IdentificationProblem:
 
     def _base_rate_jacobian(self, theta: FloatArray) -> FloatArray:
         """:meth:`base_rate_jacobian` with effects, not counted."""
-        return self._difference_jacobian(theta, self.base_rate)
+        return self._effect_jacobians(theta)[0]
 
     def _remembered(self, kind: str, theta: FloatArray, count: bool, compute: Callable[[FloatArray], FloatArray]) -> FloatArray:
         """``compute(theta)`` (3T, k), or a copy of it when one of the last :data:`REMEMBERED_JACOBIANS` Jacobians of
@@ -338,10 +345,11 @@ class IdentificationProblem:
             self.n_model_samples += self.n_params * self.n_samples * (1 if self._effects is None else 2)
         return jac.copy()
 
-    def _difference_jacobian(self, theta: FloatArray, predict: Callable[..., FloatArray]) -> FloatArray:
-        """Central differences (3T, k) of ``predict`` (:meth:`predict` or :meth:`base_rate`) with steps of 1e-6 of each
-        search width (effects: no analytic Jacobian); all 2k points go through one batched prediction, not counted."""
-        step = 1e-6 * self.parameters.width
+    def difference_jacobian(self, theta: FloatArray, predict: Callable[..., FloatArray]) -> FloatArray:
+        """Central differences (3T, k) of ``predict`` (:meth:`predict` or :meth:`base_rate`) at ``theta`` (k,) with steps
+        of :data:`DIFFERENCE_STEP` of each search width, all 2k points through one batched prediction, not counted:
+        the reference the analytic Jacobians are tested against."""
+        step = DIFFERENCE_STEP * self.parameters.width
         points = np.repeat(theta[None], 2 * self.n_params, axis=0)
         index = np.arange(self.n_params)
         points[2 * index, index] += step

@@ -188,8 +188,8 @@ def test_slosh_mass_beyond_the_liquid_left_moves_only_that_liquid(short_fuel_epi
     assert [s[0] for s in slosh.starts(np.array([10.0, 0.0, 0.0, 0.0]))] == pytest.approx([0.1 * usable] * 3)
 
 
-def test_difference_jacobian_matches_the_analytic_one_on_the_base_columns(short_fuel_episode) -> None:
-    """With effects the Jacobian is by central differences; at zero effect it equals the analytic one of the paper's model."""
+def test_jacobian_with_effects_matches_the_paper_models_on_the_base_columns(short_fuel_episode) -> None:
+    """With effects at zero, the Jacobian's base columns are those of the paper's model (each analytic on its own path)."""
     ep = short_fuel_episode
     plain = IdentificationModel(ep.robot, "fuel").problem(ep.log)
     extended = IdentificationModel(ep.robot, "fuel", effects="gyro_bias,initial_momentum").problem(ep.log)

@@ -89,6 +89,9 @@ class EffectTerm(ABC):
     names: tuple[str, ...]
     #: effects this one contains as a special case (nested models)
     nests: ClassVar[tuple[str, ...]] = ()
+    #: a measurement term that only adds to the reading (a bias): it does not change the reading's derivatives
+    #: with respect to the other unknowns (:mod:`estimators.models.effect_jacobian`)
+    additive: ClassVar[bool] = False
     #: the ``hidden_effects`` fields of ``truth.json`` (:mod:`spaceid_gym.effects`) that hold this term's unknowns,
     #: in order, each with its number of values (see :meth:`from_truth`)
     truth_fields: tuple[tuple[str, int], ...]

@@ -146,6 +146,7 @@ class GyroBias(_VectorTerm):
 
     name = "gyro_bias"
     stage = "measurement"
+    additive = True
     unit, bound, prefix, typical = "rad_s", 0.05, "bias", 1e-3
 
     def measure(self, omega: FloatArray, theta: FloatArray, context: EffectContext) -> FloatArray:
@@ -346,15 +347,7 @@ class EffectPrediction:
         if not self.measurement_terms:
             return None
         rotating = [effect_thetas[t] for t in self.terms if t.stage != "measurement"]
-        keys = np.hstack([base10, *([] if payload10 is None else [payload10]), *rotating, theta_base])
-        first: dict[bytes, int] = {}
-        rows, shared = [], []
-        for i, row in enumerate(keys):
-            group = first.setdefault(row.tobytes(), len(rows))
-            if group == len(rows):
-                rows.append(i)
-            shared.append(group)
-        return None if len(rows) == len(keys) else (np.array(rows), np.array(shared))
+        return _groups(np.hstack([base10, *([] if payload10 is None else [payload10]), *rotating, theta_base]))
 
     def _base_rate(
         self,
@@ -379,9 +372,33 @@ class EffectPrediction:
             tank_m = np.ascontiguousarray(self.slosh.tank_of(theta_base), dtype=float)
             # the slosh is driven by the motion of the rest of the robot (the slosh mass not attached)
             rest10 = base10 - _point_mass10(theta_slosh[:, 0], tank_m)
-            rest_twist = self.momentum_model.predict_twist(rest10, payload10, extra, span)
+            # the rest's motion depends on the slosh mass, not on its frequency, damping or rod: sets that share it
+            # (a scan of frequencies) share one prediction
+            momenta = [effect_thetas[t] for t in self.momentum_terms]
+            groups = _groups(np.hstack([rest10, *([] if payload10 is None else [payload10]), *momenta]))
+            if groups is None:
+                rest_twist = self.momentum_model.predict_twist(rest10, payload10, extra, span)
+            else:
+                rows, shared = groups
+                payload = None if payload10 is None else payload10[rows]
+                rest_twist = self.momentum_model.predict_twist(
+                    rest10[rows], payload, None if extra is None else extra[rows], span
+                )[shared]
             composite = self.momentum_model.mean_composite10(base10, payload10)
             relative, moved = self.slosh.momentum(rest_twist, theta_slosh, tank_m, composite, self.context)
             carried = -relative if extra is None else extra - relative
             twist = self.momentum_model.predict_twist(base10, payload10, carried, span, moved)
         return np.ascontiguousarray(twist[..., 3:])
+
+
+def _groups(keys: FloatArray) -> tuple[NDArray[np.intp], NDArray[np.intp]] | None:
+    """Rows of ``keys`` (P, n) that are equal: the first of each group (G,) and each row's group (P,); ``None`` when
+    every row is different."""
+    first: dict[bytes, int] = {}
+    rows, shared = [], []
+    for i, row in enumerate(np.ascontiguousarray(keys)):
+        group = first.setdefault(row.tobytes(), len(rows))
+        if group == len(rows):
+            rows.append(i)
+        shared.append(group)
+    return None if len(rows) == len(keys) else (np.array(rows), np.array(shared))

@@ -285,10 +285,7 @@ class Slosh(EffectTerm):
         ``composite10`` (P, 10) is the robot's mean composite (base and arm, slosh mass included) over the log,
         whose inverse inertia at the tank couples the slosh back to the base.
         """
-        omega_n = 2.0 * np.pi * theta[:, 1]
-        rest = composite10 - _point_mass10(theta[:, 0], tank_m)
-        coupling = np.eye(3) + theta[:, 0, None, None] * _inverse_mass_at(rest, tank_m)  # m_s A, finite at m_s = 0
-        projector = self.projector(theta)
+        omega_n, coupling, projector = self.oscillator(theta, tank_m, composite10)
         return _slosh_momentum(
             np.ascontiguousarray(twist),
             context.t_s,
@@ -296,9 +293,17 @@ class Slosh(EffectTerm):
             theta[:, 0],
             omega_n,
             theta[:, 2],
-            np.ascontiguousarray(projector @ coupling),
-            np.ascontiguousarray(projector),
+            coupling,
+            projector,
         )
+
+    def oscillator(self, theta: FloatArray, tank_m: FloatArray, composite10: FloatArray) -> tuple[FloatArray, ...]:
+        """The oscillator of :meth:`momentum` for ``theta`` (P, k_e): natural frequency (P,) rad/s, the projected
+        coupling ``Pi (E + m_s Lambda^-1)`` (P, 3, 3) and the projector ``Pi`` (P, 3, 3)."""
+        rest = composite10 - _point_mass10(theta[:, 0], tank_m)
+        coupling = np.eye(3) + theta[:, 0, None, None] * _inverse_mass_at(rest, tank_m)  # m_s A, finite at m_s = 0
+        projector = self.projector(theta)
+        return 2.0 * np.pi * theta[:, 1], np.ascontiguousarray(projector @ coupling), np.ascontiguousarray(projector)
 
     def physical(self, theta: FloatArray) -> dict[str, Any]:
         out: dict[str, Any] = {

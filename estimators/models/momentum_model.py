@@ -206,6 +206,13 @@ class MomentumModel:
             return d_base, None
         return d_base, -angular @ (basis_twist @ to_base + momentum_map)
 
+    def arm_terms(self, with_payload: bool) -> tuple[FloatArray, ...]:
+        """The per-sample arrays of :func:`_base_twist` after the composite's own: the arm's first moment (T, 3),
+        inertia entries (T, 6) and momentum (T, 6), and the payload maps ``A_t`` (T, 10, 10) and ``G_t`` (T, 6, 10)
+        (placeholders without a payload)."""
+        maps = self._payload_maps() if with_payload else (np.zeros((1, 10, 10)), np.zeros((1, 6, 10)))
+        return self._first_moment, self._inertia6, self._momentum, *maps
+
     # ------------------------------------------------------------------ internals
     def _payload_maps(self) -> tuple[FloatArray, FloatArray]:
         """Per-sample ``A_t`` (T, 10, 10) and ``G_t`` (T, 6, 10) of the module docstring (computed once)."""
@@ -238,6 +245,64 @@ class MomentumModel:
         return rot, pos, twist
 
 
+#: a composite's CoM (3) and its inertia about the CoM inverted: the cofactors (6) and one over the determinant
+CompositeInverse = tuple[float, float, float, float, float, float, float, float, float, float]
+
+
+@njit(cache=True, inline="always")
+def composite_inverse(
+    mass: float, hx: float, hy: float, hz: float, j: tuple[float, float, float, float, float, float]
+) -> CompositeInverse:
+    """A composite (mass, first moment h, inertia entries j about the origin) ready to solve for its rate: its CoM
+    ``(cx, cy, cz)``, the cofactors ``(c00, c01, c02, c11, c12, c22)`` of its inertia about the CoM and one over its
+    determinant."""
+    cx, cy, cz = hx / mass, hy / mass, hz / mass  # composite CoM, base frame
+    # composite inertia about its CoM, Ic = J - m S(c): [[a b e] [b d f] [e f g]]
+    a = j[0] - mass * (cy * cy + cz * cz)
+    b = j[1] + mass * cx * cy
+    d = j[2] - mass * (cx * cx + cz * cz)
+    e = j[3] + mass * cx * cz
+    f = j[4] + mass * cy * cz
+    g = j[5] - mass * (cx * cx + cy * cy)
+    c00, c01, c02 = d * g - f * f, e * f - b * g, b * f - d * e
+    c11, c12, c22 = a * g - e * e, b * e - a * f, a * d - b * b
+    inv_det = 1.0 / (a * c00 + b * c01 + e * c02)
+    return cx, cy, cz, c00, c01, c02, c11, c12, c22, inv_det
+
+
+@njit(cache=True, inline="always")
+def rate_from_inverse(
+    inverse: CompositeInverse, momentum: tuple[float, float, float, float, float, float]
+) -> tuple[float, float, float]:
+    """``omega`` of the composite of ``inverse`` (:func:`composite_inverse`) that carries ``-momentum``."""
+    cx, cy, cz, c00, c01, c02, c11, c12, c22, inv_det = inverse
+    px, py, pz = momentum[0], momentum[1], momentum[2]
+    # the base carries -h_arm: omega = Ic^{-1} r with r = -(L - c x P)
+    rx = -(momentum[3] - (cy * pz - cz * py))
+    ry = -(momentum[4] - (cz * px - cx * pz))
+    rz = -(momentum[5] - (cx * py - cy * px))
+    return (
+        (c00 * rx + c01 * ry + c02 * rz) * inv_det,
+        (c01 * rx + c11 * ry + c12 * rz) * inv_det,
+        (c02 * rx + c12 * ry + c22 * rz) * inv_det,
+    )
+
+
+@njit(cache=True, inline="always")
+def twist_from_inverse(mass: float, inverse: CompositeInverse, momentum: FloatArray, out: FloatArray, i: int, t: int) -> None:
+    """``out[i, t]`` = ``[v; omega]`` (6,) of the composite of ``mass`` and ``inverse`` (:func:`composite_inverse`) that
+    carries ``-momentum`` (6,).
+
+    ``P = m (v + omega x c)`` gives ``v = P / m - omega x c`` with ``P = -momentum[:3]``.
+    """
+    wx, wy, wz = rate_from_inverse(inverse, (momentum[0], momentum[1], momentum[2], momentum[3], momentum[4], momentum[5]))
+    cx, cy, cz = inverse[0], inverse[1], inverse[2]
+    out[i, t, 0] = -momentum[0] / mass - (wy * cz - wz * cy)
+    out[i, t, 1] = -momentum[1] / mass - (wz * cx - wx * cz)
+    out[i, t, 2] = -momentum[2] / mass - (wx * cy - wy * cx)
+    out[i, t, 3], out[i, t, 4], out[i, t, 5] = wx, wy, wz
+
+
 @njit(cache=True, inline="always")
 def _rate_of_composite(
     mass: float,
@@ -248,51 +313,16 @@ def _rate_of_composite(
     momentum: tuple[float, float, float, float, float, float],
 ) -> tuple[float, float, float]:
     """``omega`` of a composite (mass, first moment h, inertia entries j about the origin) with momentum ``-h_arm``."""
-    cx, cy, cz = hx / mass, hy / mass, hz / mass  # composite CoM, base frame
-    # composite inertia about its CoM, Ic = J - m S(c): [[a b e] [b d f] [e f g]]
-    a = j[0] - mass * (cy * cy + cz * cz)
-    b = j[1] + mass * cx * cy
-    d = j[2] - mass * (cx * cx + cz * cz)
-    e = j[3] + mass * cx * cz
-    f = j[4] + mass * cy * cz
-    g = j[5] - mass * (cx * cx + cy * cy)
-    px, py, pz = momentum[0], momentum[1], momentum[2]
-    # the base carries -h_arm: omega = Ic^{-1} r with r = -(L - c x P)
-    rx = -(momentum[3] - (cy * pz - cz * py))
-    ry = -(momentum[4] - (cz * px - cx * pz))
-    rz = -(momentum[5] - (cx * py - cy * px))
-    c00, c01, c02 = d * g - f * f, e * f - b * g, b * f - d * e
-    c11, c12, c22 = a * g - e * e, b * e - a * f, a * d - b * b
-    inv_det = 1.0 / (a * c00 + b * c01 + e * c02)
-    return (
-        (c00 * rx + c01 * ry + c02 * rz) * inv_det,
-        (c01 * rx + c11 * ry + c12 * rz) * inv_det,
-        (c02 * rx + c12 * ry + c22 * rz) * inv_det,
-    )
+    return rate_from_inverse(composite_inverse(mass, hx, hy, hz, j), momentum)
 
 
 @njit(cache=True, inline="always")
 def _twist_of_composite(
     mass: float, hx: float, hy: float, hz: float, j: FloatArray, momentum: FloatArray, out: FloatArray, i: int, t: int
 ) -> None:
-    """``out[i, t]`` = ``[v; omega]`` (6,) of a composite that carries ``-momentum`` (6,) (see :func:`_rate_of_composite`;
-    ``j`` (6,) the inertia entries).
-
-    ``P = m (v + omega x c)`` gives ``v = P / m - omega x c`` with ``P = -momentum[:3]``.
-    """
-    wx, wy, wz = _rate_of_composite(
-        mass,
-        hx,
-        hy,
-        hz,
-        (j[0], j[1], j[2], j[3], j[4], j[5]),
-        (momentum[0], momentum[1], momentum[2], momentum[3], momentum[4], momentum[5]),
-    )
-    cx, cy, cz = hx / mass, hy / mass, hz / mass
-    out[i, t, 0] = -momentum[0] / mass - (wy * cz - wz * cy)
-    out[i, t, 1] = -momentum[1] / mass - (wz * cx - wx * cz)
-    out[i, t, 2] = -momentum[2] / mass - (wx * cy - wy * cx)
-    out[i, t, 3], out[i, t, 4], out[i, t, 5] = wx, wy, wz
+    """``out[i, t]`` = ``[v; omega]`` (6,) of a composite that carries ``-momentum`` (6,) (:func:`twist_from_inverse`;
+    ``j`` (6,) the inertia entries)."""
+    twist_from_inverse(mass, composite_inverse(mass, hx, hy, hz, (j[0], j[1], j[2], j[3], j[4], j[5])), momentum, out, i, t)
 
 
 @njit(cache=True, inline="always")
@@ -329,6 +359,7 @@ def _base_twist(
     comp = np.empty(10)
     for i in range(n_p):
         for t in range(n_t):
+            # written out: through a shared helper (used by the tangent kernel at first) numba made this loop 2.3x slower
             for k in range(10):
                 comp[k] = params10[i, k]
             for k in range(6):
