@@ -229,32 +229,6 @@ class IdentificationProblem:
             return self.jacobian(theta, count)
         return self._remembered("base_rate", np.asarray(theta, dtype=float), count, self._base_rate_jacobian)
 
-    def rates(self, theta: FloatArray, count: bool = True) -> tuple[FloatArray, FloatArray]:
-        """The base's own rate and the gyro's predicted reading, each (P, T, 3), rad/s, base body frame, for ``theta``
-        (P, k), from one evaluation of the model (:meth:`base_rate` and :meth:`predict`; equal without measurement
-        effects)."""
-        theta = np.atleast_2d(np.asarray(theta, dtype=float))
-        if self._effects is None:
-            omega = self.predict(theta, count=count)
-            return omega, omega
-        base, gyro = self._effect_rates(theta, slice(None))
-        if count:
-            self.n_model_samples += base.shape[0] * base.shape[1]
-        return base, gyro
-
-    def rates_jacobian(self, theta: FloatArray, count: bool = True) -> tuple[FloatArray, FloatArray]:
-        """``d base_rate / d theta`` and ``d predict / d theta``, each (3T, k), at ``theta`` (k,), from one pass of the
-        analytic derivatives (:meth:`base_rate_jacobian`, :meth:`jacobian`)."""
-        if self._effects is None:
-            jac = self.jacobian(theta, count)
-            return jac, jac
-        both = self._remembered("rates", np.asarray(theta, dtype=float), count, self._rates_jacobian)
-        return both[: 3 * self.n_samples], both[3 * self.n_samples :]
-
-    def _rates_jacobian(self, theta: FloatArray) -> FloatArray:
-        """:meth:`rates_jacobian` stacked (6T, k), not counted."""
-        return np.vstack(self._effect_jacobians(theta))
-
     def _effect_jacobians(self, theta: FloatArray) -> tuple[FloatArray, FloatArray]:
         """With effects: ``d base_rate / d theta`` and ``d predict / d theta`` (3T, k), analytic
         (:func:`~estimators.models.effect_jacobian.effect_jacobians`), not counted."""

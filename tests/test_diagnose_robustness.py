@@ -289,7 +289,7 @@ def test_the_gyro_coupling_of_a_complementary_filter_is_recovered(gain: float) -
 
 
 def test_the_coupled_channel_jacobian_matches_finite_differences() -> None:
-    """The attitude channel given the gyro: its Jacobian (base rate and gyro reading through the coupling) against
+    """The attitude channel given the gyro: its Jacobian (the base rate, directly and through the coupling) against
     central differences of its own residual steps, on a fused log with a gyro bias in the model."""
     env = simulate_variation(draw_variation("gyro_bias", 9004, {"attitude": "fused"}), 10.0)
     log, truth = env.measurement_log(), truth_of(env)

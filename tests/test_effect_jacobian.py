@@ -44,9 +44,6 @@ def test_analytic_jacobians_match_central_differences(short_fuel_episode, monkey
     theta = np.concatenate((interior_start(params)[:4], CASES[effects]))
     assert theta.shape == (params.n_params,) and np.all((params.lower <= theta) & (theta <= params.upper))
     analytic = {"predict": problem.jacobian(theta, count=False), "base_rate": problem.base_rate_jacobian(theta, count=False)}
-    base, gyro = problem.rates_jacobian(theta, count=False)
-    np.testing.assert_array_equal(base, analytic["base_rate"])
-    np.testing.assert_array_equal(gyro, analytic["predict"])
     errors = {kind: np.full(params.n_params, np.inf) for kind in analytic}
     for step in STEPS:
         monkeypatch.setattr(problem_module, "DIFFERENCE_STEP", step)
