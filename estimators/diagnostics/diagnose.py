@@ -12,8 +12,9 @@ For a model (robot, parameterisation, effects already in it) and a log, :func:`d
    sees the integral of the base rate (a slow torque, a momentum) far more sharply than the gyro and
    is blind to gyro errors (bias, scale, delay), so it also tells a biased gyro from a real rotation. With
    attitude, every fit (the baseline refitted from the estimator's result) minimises both channels
-   together, weighted by their noise (:class:`ChannelWeights`: the gyro's from the baseline's residual, the
-   star tracker's from the data). For a candidate:
+   together, weighted by their noise (:class:`ChannelWeights`: the gyro's from the white part of the baseline's
+   residual, the star tracker's from the data). Then a candidate nested in another that fits significantly better is
+   refitted from that one's fit (:func:`_refit_nested_from_containers`). For a candidate:
 
    * ``lr_statistic = X_baseline - X_candidate``, chi-square with ``k_e`` degrees of freedom when the
      effect is absent (nested models): ``p_value``; *significant* below ``alpha / (number of
