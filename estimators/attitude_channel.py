@@ -305,8 +305,8 @@ class AttitudeChannel:
         reads, so its error follows the gyro's whole error, the reading's measurement effects (a delay, a scale, a
         bias) included; a model with such an effect explains the gyro's reading, not the fused attitude's error.
         Against the reading, a delay fitted on a fused log left the filter's response to the delay in the attitude
-        residual, and the fuel unknowns bent to absorb it (held-out fuel errors of 8-40 Cramer-Rao std after naming
-        the delay at 100 Hz)."""
+        residual, and the fuel unknowns bent to absorb it (fuel errors of 8-42 Cramer-Rao std after naming
+        the delay on design logs at 100 Hz)."""
         return (base[:, 1:] - self.problem.measured[1:]) * self._dt_s[:, None]
 
     def _coupled(self, base: FloatArray) -> FloatArray:

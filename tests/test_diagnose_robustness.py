@@ -346,7 +346,7 @@ def test_a_fused_attitude_is_compared_given_the_gyro_error_a_delay_included() ->
     """A fused attitude integrates the gyro as it reads, its delay included: given the gyro, the attitude residual at the
     truth of a model with the delay must carry no trace of the filter's response to the delay. Conditioning on the gyro
     reading the model predicts (the delay taken out) left that response whole (coefficient -1 below), and the fuel
-    unknowns bent to absorb it after naming the delay (8-40 Cramer-Rao std on design seeds at 100 Hz). The filter's
+    unknowns bent to absorb it after naming the delay (8-42 Cramer-Rao std on design seeds at 100 Hz). The filter's
     response here is the closed form of the simulator's first-order filter (gain K per sample)."""
     env = simulate_variation(draw_variation("delay", 9705, {"attitude": "fused"}), 20.0)
     log, truth = env.measurement_log(), truth_of(env)
