@@ -1,0 +1,60 @@
+"""Where the tracking filter's NEES comes from: each window's error per unknown in the filter's own std.
+
+For each mission seed: the mission of ``spaceid track`` (paper6, 10 windows, the first taken from ``hybrid``'s fit
+with its Cramér-Rao covariance), then the filter window by window with ``--passes`` tempered passes over each later
+window (1: the plain filter ``spaceid track`` runs; P: the noise variance times P, state and covariance carried,
+as the ``ukf`` estimator's fit does). Prints per window the NEES and ``z = error / std`` of the fuel consumed and of
+the three tank coordinates, then the mission's mean NEES. A consistent filter has z ~ N(0, 1) in each unknown
+and the mean NEES within the 95 % bounds of chi-square(4)'s mean.
+
+Usage::
+
+    python benchmarks/track_nees.py --passes 1 102 105 101
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from estimators.problem import IdentificationModel
+from spaceid_gym.robots import load_robot
+from spaceid_gym.tracking import DEFAULT_GAP_S, _ukf, first_window_tracker, mean_bounds, mission_random_walk, simulate_mission
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("seeds", type=int, nargs="+", help="mission seeds")
+    parser.add_argument("--passes", type=int, default=1, help="tempered passes over each later window (default 1)")
+    args = parser.parse_args()
+    model = IdentificationModel(load_robot("paper6"), "fuel")
+    low, high = mean_bounds(4, 10)
+    for seed in args.seeds:
+        windows = simulate_mission("paper6", 10, seed)
+        tracker, noise, nees = None, 0.0, []
+        for window in windows:
+            problem = model.problem(window.log)
+            if tracker is None:
+                tracker, _ = first_window_tracker(_ukf("ukf", seed), problem, "batch", seed)
+                tracker.random_walk = mission_random_walk("paper6", DEFAULT_GAP_S)
+                noise = tracker.noise_std_rad_s
+            else:
+                tracker.advance(DEFAULT_GAP_S)
+                tracker.bind(problem)
+                tracker.set_noise(noise)
+                for _ in range(args.passes):
+                    tracker.rewind()
+                    for index in range(problem.n_samples):
+                        tracker.update(index, weight=1.0 / args.passes)
+            x, cov = tracker.estimate()
+            noise = problem.noise_std(x)[0]
+            error = x - window.theta_true
+            nees.append(float(error @ np.linalg.solve(cov, error)))
+            z = error / np.sqrt(np.diag(cov))
+            print(f"seed {seed} window {window.index}: NEES {nees[-1]:8.2f}  z fuel {z[0]:+6.2f}  z tank {np.round(z[1:], 2)}")
+        print(f"seed {seed}: mean NEES {np.mean(nees):.2f} (95 % bounds {low:.2f}-{high:.2f})")
+
+
+if __name__ == "__main__":
+    main()
