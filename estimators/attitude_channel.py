@@ -72,7 +72,7 @@ class GyroCoupling:
     coefficients: FloatArray
 
     def response(self, gyro_steps: FloatArray) -> FloatArray:
-        """The filter's output (P, n, 3) for gyro residual steps (P, n, 3), rad: ``sum_l c_l g_{k-l}``, zero before the
+        """The filter's output (P, n, 3) for gyro error steps (P, n, 3), rad: ``sum_l c_l g_{k-l}``, zero before the
         first and after the last step."""
         out = np.zeros_like(gyro_steps)
         n = gyro_steps.shape[1]
@@ -108,11 +108,11 @@ def min_coupling_samples(dt_s: float) -> int:
 
 
 def estimate_gyro_coupling(differences: FloatArray, gyro_steps: FloatArray, dt_s: float) -> GyroCoupling:
-    """:class:`GyroCoupling` of attitude residual steps ``differences`` (n, 3) on gyro residual steps ``gyro_steps``
+    """:class:`GyroCoupling` of attitude residual steps ``differences`` (n, 3) on the gyro's error steps ``gyro_steps``
     (n, 3), both rad, from a fit of the model (the baseline's), lags -1 .. ``COUPLING_SPAN_S / dt_s``, their sum held
     at zero: an attitude fused with an absolute sensor (a star tracker) follows it at low frequency, not the gyro,
-    and a free sum, fitted from the noise, let a candidate that shifts the gyro residual slowly (a bias) move the
-    attitude residual through it (clean fused logs were named external_torque or gyro_bias).
+    and a free sum, fitted from the noise, let a candidate that shifts the gyro's error slowly (a momentum, whose
+    base rate differs) move the attitude residual through it (clean fused logs were named external_torque or gyro_bias).
 
     Least squares per axis on the first differences of both: a missing effect's slow signature, in both channels
     at that fit, must not be taken for the filter's response (the dependence test,
@@ -135,7 +135,7 @@ def estimate_gyro_coupling(differences: FloatArray, gyro_steps: FloatArray, dt_s
             else:
                 design[: n + lag, index] = g[-lag:, axis]
         # sum of the coefficients zero (the last one minus the others): a constant gyro error moves a fused attitude
-        # by a bounded amount, its steps by nothing, so a slow gyro residual (a bias, a momentum) passes nothing
+        # by a bounded amount, its steps by nothing, so a slow gyro error (a bias, a slow rate misfit) passes nothing
         free = np.linalg.lstsq(design[:, :-1] - design[:, -1:], a[:, axis], rcond=None)[0]
         coefficients[:, axis] = np.append(free, -free.sum())
     return GyroCoupling(coefficients)

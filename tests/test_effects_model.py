@@ -350,3 +350,18 @@ def test_search_ranges_are_physically_wide_and_a_bound_is_no_reason(paper6: Robo
         on_bound = term.upper.copy()
         assert term.implausible(on_bound) == [], term.name
         assert term.implausible(on_bound, np.eye(term.n_params) * 1e-12) == [], term.name
+
+
+def test_a_nesting_terms_unknowns_begin_with_the_nested_terms(paper6: Robot) -> None:
+    """The diagnosis refits a nested candidate from its container's fit cut to the nested term's unknowns
+    (``estimators.diagnostics.diagnose._refit_nested_from_containers``): that cut is the nested model only if the
+    container's unknowns begin with the nested term's, in the same order and ranges."""
+    pairs = [(outer, inner) for outer, term in EFFECT_TERMS.items() for inner in term.nests]
+    assert pairs  # the catalogue has at least external_torque > initial_momentum
+    for outer, inner in pairs:
+        big = IdentificationModel(paper6, "fuel", effects=(outer,)).parameters
+        small = IdentificationModel(paper6, "fuel", effects=(inner,)).parameters
+        k = small.n_params
+        assert big.names[:k] == small.names, (outer, inner)
+        np.testing.assert_array_equal(big.lower[:k], small.lower)
+        np.testing.assert_array_equal(big.upper[:k], small.upper)

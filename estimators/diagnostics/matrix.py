@@ -40,10 +40,10 @@ ELIGIBLE_POWER = 0.9
 
 def run_variation(case: VariationCase, duration_s: float = 60.0) -> dict[str, Any]:
     """Simulate the variation ``case`` (:func:`spaceid_gym.variations.simulate_variation`), compute the expected
-    power of its effect's test, diagnose it as :func:`run_case` does; one row: the case's cells
+    power of its effect's test, diagnose it as :func:`~estimators.diagnostics.suite.run_case` does; one row: the case's cells
     (:func:`_variation_cells`), ``expected_power`` (NaN for a clean log), the verdict columns of
-    :func:`diagnosed_cells` and ``wall_time_s``. A log whose power or diagnosis raises gives a row with the verdict
-    ``error`` (and the power when it was computed), as :func:`guarded_case`."""
+    :func:`~estimators.diagnostics.suite.diagnosed_cells` and ``wall_time_s``. A log whose power or diagnosis raises gives a row with the verdict
+    ``error`` (and the power when it was computed), as :func:`~estimators.diagnostics.suite.guarded_case`."""
     start = time.perf_counter()
     row = _variation_cells(case)
     try:

@@ -380,7 +380,7 @@ class AttitudeIndependence:
         return (
             f"the attitude's steps follow the gyro's own noise (correlation {self.raw[0]:+.2f} of their high-frequency "
             f"parts, p = {self.raw[1]:.2g}): an attitude estimate fused with this gyro, so the attitude is compared given "
-            f"the gyro (its response to the gyro's residual taken out; correlation left {self.coupled[0]:+.2f})"
+            f"the gyro (its response to the gyro's error taken out; correlation left {self.coupled[0]:+.2f})"
         )
 
 
