@@ -13,7 +13,7 @@ modelled as
 Then ``u_k = d_k - phi d_{k-1} = w_k - (1 + phi) w_{k-1} + phi w_{k-2} + nu_k`` (``k >= 2``) of the residual's
 differences ``d`` is a moving average of order 2: its covariance is banded, and :meth:`AttitudeNoise.whiten` whitens
 ``u`` with that covariance's banded Cholesky factor, a chi-square exact for this model. The three numbers per axis
-are fitted by maximum likelihood (:func:`fit_attitude_noise`).
+are fitted by maximum likelihood (:func:`fit_attitude_noise`), the overall scale in closed form.
 """
 
 from __future__ import annotations
@@ -34,8 +34,9 @@ from spaceid_gym.errors import SpaceIdInputError
 #: noise-free log (the midpoint rule's own error there is ~1e-9 rad per step)
 MIN_STD_RAD = 1e-10
 
-#: the range of the log-stds the error model's fit explores (:func:`fit_attitude_noise`): MIN_STD_RAD to 1 rad
-LOG_STD_LIMITS = (math.log(MIN_STD_RAD), 0.0)
+#: the range of the logit of the white error's share of the variance, ``sw^2 / (sw^2 + snu^2)``, that the error
+#: model's fit explores (:func:`fit_attitude_noise`): either part down to 1e-20 of the other
+LOGIT_SHARE_LIMIT = math.log(1e20)
 
 #: the largest step correlation ``phi`` fitted (:func:`fit_attitude_noise`)
 MAX_CORRELATION = 0.999
@@ -133,62 +134,99 @@ def _filtered_factor(white_std: float, walk_std: float, phi: float, n: int) -> F
     return cholesky_banded(bands, lower=True, check_finite=False)
 
 
+def _shares(x: FloatArray) -> tuple[float, float, float]:
+    """``(sw^2, snu^2, phi)`` with ``sw^2 + snu^2 = 1`` of a point ``x = [logit share, logit phi]`` of the profile
+    likelihood's plane, clamped to the explored range (beyond it the likelihood is flat, and exp would overflow where
+    the simplex wanders)."""
+    share = 1.0 / (1.0 + math.exp(-min(max(x[0], -LOGIT_SHARE_LIMIT), LOGIT_SHARE_LIMIT)))
+    phi = MAX_CORRELATION / (1.0 + math.exp(-min(max(x[1], -50.0), 50.0)))
+    return share, 1.0 - share, phi
+
+
+def _profile_scale(chi2_unit: float, n: int) -> float:
+    """The maximum-likelihood variance scale ``sigma^2`` of a covariance ``sigma^2 C`` whose whitened residual has
+    chi-square ``chi2_unit`` under ``C`` (``n`` values), floored at :data:`MIN_STD_RAD` squared (a residual of zeros)."""
+    return max(chi2_unit / n, MIN_STD_RAD**2)
+
+
 def _negative_log_likelihood(x: FloatArray, differences: FloatArray) -> float:
-    """``-log L`` (up to a constant) of one axis's differences (n,) for ``x = [log sw, log snu, logit phi]``."""
-    # outside these the likelihood is flat (a std below MIN_STD_RAD or above 1 rad, phi at 0 or its cap), and exp
-    # would overflow where the simplex wanders
-    log_sw, log_snu = (min(max(v, LOG_STD_LIMITS[0]), LOG_STD_LIMITS[1]) for v in x[:2])
-    phi = MAX_CORRELATION / (1.0 + math.exp(-min(max(x[2], -50.0), 50.0)))
-    sw2, snu2 = max(math.exp(log_sw), MIN_STD_RAD) ** 2, max(math.exp(log_snu), MIN_STD_RAD) ** 2
-    return _whitened_log_likelihood(sw2, snu2, phi, differences)
+    """``-log L`` (up to a constant) of one axis's differences (n,) at ``x = [logit share, logit phi]``, maximised
+    over the variance scale (the profile likelihood): the covariance is ``sigma^2 C(share, phi)``, and ``sigma^2 =
+    chi2_C / n`` in closed form."""
+    sw2, snu2, phi = _shares(x)
+    half_log_det, chi2_unit = _whitened_terms(sw2, snu2, phi, differences)
+    n = len(differences) - 1
+    scale = _profile_scale(chi2_unit, n)
+    return 0.5 * n * math.log(scale) + half_log_det + 0.5 * chi2_unit / scale
+
+
+#: relative change of a Cholesky row below which the factor counts as stationary (:func:`_whitened_terms`)
+STATIONARY_RTOL = 1e-15
 
 
 @njit(cache=True)
-def _whitened_log_likelihood(sw2: float, snu2: float, phi: float, d: FloatArray) -> float:
-    """``sum log L_jj + |L^-1 u|^2 / 2`` for ``u = d_k - phi d_{k-1}`` and ``L`` the Cholesky factor of the covariance of
+def _whitened_terms(sw2: float, snu2: float, phi: float, d: FloatArray) -> tuple[float, float]:
+    """``(sum log L_jj, |L^-1 u|^2)`` for ``u = d_k - phi d_{k-1}`` and ``L`` the Cholesky factor of the covariance of
     :func:`_filtered_factor`, in one pass: each row of ``L`` (three numbers, the covariance is banded Toeplitz) and
     the forward substitution as they come, without storing either."""
     c0 = sw2 * (1.0 + (1.0 + phi) ** 2 + phi * phi) + snu2
     c1 = -sw2 * (1.0 + phi) ** 2
     c2 = sw2 * phi
+    n = len(d) - 1
     log_det, chi2 = 0.0, 0.0
     diag1, diag2, sub1 = 1.0, 1.0, 0.0  # L[j-1, j-1], L[j-2, j-2], L[j-1, j-2]
     w1, w2 = 0.0, 0.0  # the whitened values of rows j-1 and j-2
-    for j in range(len(d) - 1):
+    j = 0
+    while j < n:
         far = c2 / diag2 if j >= 2 else 0.0  # L[j, j-2]
         near = (c1 - far * sub1) / diag1 if j >= 1 else 0.0  # L[j, j-1]
         diag = math.sqrt(c0 - far * far - near * near)
         w = (d[j + 1] - phi * d[j] - far * w2 - near * w1) / diag
         log_det += math.log(diag)
         chi2 += w * w
+        # the rows converge to the stationary factor (the spectral factor of the MA(2)); once a row equals the one
+        # before to STATIONARY_RTOL, the rest are that row and the substitution is a fixed recursion
+        settled = j >= 3 and abs(diag - diag1) <= STATIONARY_RTOL * diag and abs(near - sub1) <= STATIONARY_RTOL * diag
         diag2, diag1, sub1, w2, w1 = diag1, diag, near, w1, w
-    return log_det + 0.5 * chi2
+        j += 1
+        if settled:
+            break
+    if j < n:
+        inverse = 1.0 / diag1
+        far = c2 / diag1
+        log_det += (n - j) * math.log(diag1)
+        for i in range(j, n):
+            w = (d[i + 1] - phi * d[i] - far * w2 - sub1 * w1) * inverse
+            chi2 += w * w
+            w2, w1 = w1, w
+    return log_det, chi2
 
 
-#: the error model's Nelder-Mead stops when the simplex spans less than ``xatol`` in the log-stds and the logit of
-#: ``phi`` and less than ``fatol`` in ``-log L`` (on three logs, clean orbit7 with a star tracker, a fused and an
-#: exact attitude, the maximum of ``log L`` agreed with 1e-4 and 1e-6 to 1e-6, in half the evaluations)
+#: the error model's Nelder-Mead stops when the simplex spans less than ``xatol`` in the logits of the white share
+#: and of ``phi`` and less than ``fatol`` in ``-log L`` (a thousandth of a unit of a likelihood ratio)
 NELDER_MEAD_TOLERANCES = {"xatol": 1e-3, "fatol": 1e-3}
 
 
 def fit_attitude_noise(differences: FloatArray, start: AttitudeNoise | None = None) -> AttitudeNoise:
     """Maximum-likelihood :class:`AttitudeNoise` of differenced attitude residuals (T-1, 3), rad, axis by axis.
 
-    Starts from the moments of a white error plus a random walk (lag-1 autocovariance ``-sw^2``, variance
-    ``2 sw^2 + snu^2``) with ``phi`` = 0.5, and from ``phi`` = 0.05 and 0.95, refining all three numbers with
-    Nelder-Mead (a smooth three-dimensional likelihood); the best of the three. ``start``: an error model fitted
-    to a nearby residual (another model's on the same log), tried as a fourth start."""
+    The variance's scale is profiled out in closed form (:func:`_negative_log_likelihood`), so Nelder-Mead searches
+    the plane of the white error's share of the variance and ``phi`` (two dimensions instead of three; the same
+    maximum, to 1e-4 in ``log L`` on six logs of every attitude source, with up to half the evaluations). Starts from the moments of a white error plus a random walk (lag-1
+    autocovariance ``-sw^2``, variance ``2 sw^2 + snu^2``) with ``phi`` = 0.5, and from ``phi`` = 0.05 and 0.95; the
+    best of the three. ``start``: an error model fitted to a nearby residual (another model's on the same log),
+    tried as a fourth start."""
     white, walk, correlation = [], [], []
     for axis, d in enumerate(np.asarray(differences, dtype=float).T):
         variance = float(d @ d) / len(d)
         lag1 = float(d[1:] @ d[:-1]) / len(d)
         sw2 = min(max(-lag1, 0.01 * variance), 0.49 * variance)
         snu2 = max(variance - 2.0 * sw2, 0.01 * variance)
-        logs = 0.5 * np.log(np.maximum([sw2, snu2], MIN_STD_RAD**2))
-        starts = [np.array([*logs, _logit(phi)]) for phi in (0.05, 0.5, 0.95)]
+        share = _logit_share(sw2, snu2)
+        starts = [np.array([share, _logit(phi)]) for phi in (0.05, 0.5, 0.95)]
         if start is not None:
-            near = (start.white_std_rad[axis], start.walk_std_rad[axis])
-            starts.append(np.array([*np.log(np.maximum(near, MIN_STD_RAD)), _logit(start.walk_correlation[axis])]))
+            near_w2, near_r2 = start.white_std_rad[axis] ** 2, start.walk_std_rad[axis] ** 2
+            starts.append(np.array([_logit_share(near_w2, near_r2), _logit(start.walk_correlation[axis])]))
         best = None
         for x0 in starts:
             result = minimize(_negative_log_likelihood, x0, args=(d,), method="Nelder-Mead", options=NELDER_MEAD_TOLERANCES)
@@ -196,11 +234,19 @@ def fit_attitude_noise(differences: FloatArray, start: AttitudeNoise | None = No
                 best = result
         assert best is not None
         # the point as the likelihood saw it (clamped to the explored range, where the simplex may have wandered)
-        w, r = (math.exp(min(max(v, LOG_STD_LIMITS[0]), LOG_STD_LIMITS[1])) for v in best.x[:2])
+        w2, r2, phi = _shares(best.x)
+        scale = _profile_scale(_whitened_terms(w2, r2, phi, d)[1], len(d) - 1)
+        w, r = math.sqrt(w2 * scale), math.sqrt(r2 * scale)
         white.append(w if w > MIN_STD_RAD else 0.0)
         walk.append(r if r > MIN_STD_RAD else 0.0)
-        correlation.append(MAX_CORRELATION / (1.0 + math.exp(-min(max(best.x[2], -50.0), 50.0))))
+        correlation.append(phi)
     return AttitudeNoise(tuple(white), tuple(walk), tuple(correlation))  # type: ignore[arg-type]
+
+
+def _logit_share(white_var: float, walk_var: float) -> float:
+    """The Nelder-Mead coordinate of the white share ``white_var / (white_var + walk_var)``, within the explored range."""
+    white_var, walk_var = max(white_var, MIN_STD_RAD**2), max(walk_var, MIN_STD_RAD**2)
+    return min(max(math.log(white_var / walk_var), -LOGIT_SHARE_LIMIT), LOGIT_SHARE_LIMIT)
 
 
 def _logit(phi: float) -> float:

@@ -242,8 +242,8 @@ def test_the_error_models_fit_survives_a_simplex_that_wanders_far() -> None:
     """The likelihood is flat, not an overflow, far outside the explored range (a held-out log raised OverflowError
     when the simplex stepped to exp(800)); a residual of exact zeros fits the smallest stds."""
     d = np.random.default_rng(0).standard_normal(500) * 1e-6
-    assert np.isfinite(_negative_log_likelihood(np.array([800.0, -900.0, 1e5]), d))
-    assert np.isfinite(_negative_log_likelihood(np.array([-800.0, 900.0, -1e5]), d))
+    assert np.isfinite(_negative_log_likelihood(np.array([800.0, 1e5]), d))
+    assert np.isfinite(_negative_log_likelihood(np.array([-800.0, -1e5]), d))
     noise = fit_attitude_noise(np.zeros((200, 3)))
     assert max(noise.white_std_rad) <= 1e-9 and max(noise.walk_std_rad) <= 1e-9
 

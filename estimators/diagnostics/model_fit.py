@@ -201,7 +201,7 @@ def fit_model(
     else:
         if not starts:
             raise SpaceIdInputError("fit_model: give an estimator or at least one start")
-        polish = LevenbergMarquardt(max_iterations=MAX_ITERATIONS)
+        polish = LevenbergMarquardt(max_iterations=MAX_ITERATIONS, ftol=step_ftol(3 * problem.n_samples))
         results = [polish.polish(problem, start).theta for start in starts]
         if channel is not None:
             assert weights is not None
@@ -239,6 +239,20 @@ def fit_model(
 
 #: accepted least-squares steps per start of a candidate fit
 MAX_ITERATIONS = 30
+
+#: a candidate's least-squares fits stop at a step that lowers the chi-square by less than this many units (at the
+#: fit's own residual level; :func:`step_ftol`): a fit that only fits noise (a slosh oscillator on a clean log) crawls
+#: along a flat valley for all of :data:`MAX_ITERATIONS` at a few hundredths of a unit per step, while the
+#: likelihood-ratio tests it feeds have thresholds of several units
+MIN_STEP_GAIN_CHI2 = 0.05
+
+
+def step_ftol(n_values: int) -> float:
+    """scipy's relative ``ftol`` for fits of ``n_values`` residuals that stops at a step gaining less than
+    :data:`MIN_STEP_GAIN_CHI2` (a cost relative to its value; the chi-square at the residual's own level is the
+    number of values)."""
+    return MIN_STEP_GAIN_CHI2 / max(n_values, 1)
+
 
 #: block length (s) of the low-frequency test of the whitened attitude residual (:func:`low_frequency_p_value`):
 #: the band below ~0.5 Hz where the effects act
@@ -289,6 +303,7 @@ def _joint_fit(
         bounds=(params.lower, params.upper),
         x_scale=params.scale,
         method="trf",
+        ftol=step_ftol(3 * problem.n_samples + channel.n_values),
         max_nfev=MAX_ITERATIONS,
     )
     return np.asarray(result.x, dtype=float)
