@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 import types
 
 import numpy as np
@@ -25,7 +26,7 @@ from estimators.diagnostics.diagnose import (
 )
 from estimators.diagnostics.model_fit import _scored
 from estimators.diagnostics.suite import DIAGNOSTIC_EXCITATION
-from estimators.diagnostics.verdict import _prefer_encompassing, _score
+from estimators.diagnostics.verdict import _prefer_encompassing, _score, rivals
 from estimators.diagnostics.workflow import parameter_errors, run_loop, write_report
 from estimators.problem import IdentificationModel
 from estimators.registry import make_estimator
@@ -168,6 +169,28 @@ def test_nesting_test_is_corrected_for_the_containers_compared_only(nested_stati
     verdict, reason = _verdict(baseline, [momentum, torque, bias], analysis=None, alpha=0.01)  # type: ignore[arg-type]
     assert verdict == expected, reason
     assert ("contains initial_momentum" in reason) == (expected == "external_torque")
+
+
+@pytest.mark.parametrize(("bias_margin", "rival"), [(2.3, True), (4.0, True), (4.5, False)])
+def test_a_candidate_the_log_hardly_tells_from_the_verdict_is_named_as_its_rival(bias_margin: float, rival: bool) -> None:
+    """The scores of held-out log 9401 (``paper6``, 50 Hz, no attitude, a gyro bias hidden): ``initial_momentum``
+    2.3 below ``gyro_bias`` in BIC with the same unknowns, so the verdict names the momentum; the bias is reported as
+    its rival, with its posterior probability, while the margin is under 2 ln 9 = 4.39 (odds of 9 to 1), and not
+    beyond it. ``external_torque`` contains the momentum (a special case, tested by the nesting rule) and is never a
+    rival of it."""
+    baseline = _scored_fit(None, 4, 11300.0)
+    momentum = _scored_fit("initial_momentum", 7, 9106.0)
+    bias = _scored_fit("gyro_bias", 7, 9106.0 + bias_margin)
+    torque = _scored_fit("external_torque", 10, 9104.0)
+    fits = [momentum, bias, torque]
+    verdict, _ = _verdict(baseline, fits, analysis=None, alpha=0.01)  # type: ignore[arg-type]
+    assert verdict == "initial_momentum"
+    found = rivals(verdict, fits)
+    assert [f.effect for f, _ in found] == (["gyro_bias"] if rival else [])
+    if rival:
+        odds = math.exp(-0.5 * bias_margin)
+        assert found[0][1] == pytest.approx(odds / (1.0 + odds))
+    assert rivals("none", fits) == []
 
 
 def test_explained_fraction_is_capped_at_all_of_the_excess() -> None:

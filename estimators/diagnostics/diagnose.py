@@ -48,8 +48,11 @@ For a model (robot, parameterisation, effects already in it) and a log, :func:`d
    baseline residual is white (:func:`~estimators.diagnostics.residuals.analyse_residuals`); ``"unexplained"``
    otherwise, with the residual structure described (dominant frequencies, correlated inputs, where in time).
 
+   A named verdict comes with its *rivals* (:func:`~estimators.diagnostics.verdict.rivals`): other named
+   candidates within ``2 ln 9`` of its BIC, which the log hardly tells from it; the reason names them.
+
 ``Diagnosis.to_dict()`` is the ``diagnose --out`` JSON: ``verdict`` (a catalogue name, ``none`` or
-``unexplained``), ``candidates`` (the named one first, then by BIC; each with ``effect`` and its figures) and
+``unexplained``), ``rivals`` (each with its BIC and posterior probability), ``candidates`` (the named one first, then by BIC; each with ``effect`` and its figures) and
 ``combined`` (the joint fits of the encompassing test).
 """
 
@@ -85,7 +88,7 @@ from estimators.diagnostics.model_fit import low_frequency_p_value as low_freque
 from estimators.diagnostics.residuals import ResidualAnalysis, analyse_residuals
 from estimators.diagnostics.verdict import NO_MISSING_EFFECT as NO_MISSING_EFFECT
 from estimators.diagnostics.verdict import UNEXPLAINED as UNEXPLAINED
-from estimators.diagnostics.verdict import _challengers, _chi2, _leader, _score, _verdict, nested_p_value
+from estimators.diagnostics.verdict import _challengers, _chi2, _leader, _score, _verdict, nested_p_value, rivals
 from estimators.estimate import Estimate
 from estimators.least_squares import interior_start
 from estimators.models.effect_models import EFFECT_TERMS
@@ -119,6 +122,8 @@ class Diagnosis:
         combined: the leader fitted together with each challenger (:func:`_prefer_encompassing`; often none).
         attitude_rejected: the log has attitude, but its residual fitted its error model at no candidate, so this
             diagnosis rests on the gyro alone (``weights`` is ``None``; the reason says so).
+        rivals: named candidates the log cannot tell from the verdict (:func:`~estimators.diagnostics.verdict.rivals`),
+            each with its posterior probability; the reason names them.
     """
 
     verdict: str
@@ -132,6 +137,7 @@ class Diagnosis:
     baseline_estimate: Estimate | None = field(default=None, repr=False)
     combined: list[ModelFit] = field(default_factory=list)
     attitude_rejected: bool = False
+    rivals: list[tuple[ModelFit, float]] = field(default_factory=list)
 
     @property
     def attitude_consistent(self) -> bool:
@@ -157,6 +163,7 @@ class Diagnosis:
             "noise_std_rad_s": self.noise_std_rad_s,
             "attitude_channel": None if self.weights is None else self.weights.to_dict(),
             "attitude_rejected": self.attitude_rejected,
+            "rivals": [{"effect": f.effect, "bic": f.bic, "posterior": p} for f, p in self.rivals],
             "baseline": self.baseline.to_dict(),
             "candidates": [c.to_dict() for c in self.candidates],
             "combined": [c.to_dict() for c in self.combined],
@@ -283,8 +290,13 @@ def _diagnose(
             fit.residual_consistent = analysed.consistent_with_noise
     analysis = _analyse_fit(model, log, baseline.theta, sigma)
     verdict, reason = _verdict(baseline, fits, analysis, alpha, combined)
+    close = rivals(verdict, fits)
+    if close:
+        chosen = next(f for f in fits if f.effect == verdict)
+        odds = ", ".join(f"{f.effect} (BIC {f.bic - chosen.bic:+.1f}, posterior {p:.2f})" for f, p in close)
+        reason += f"; but the log hardly tells it from {odds}: both describe it about as well"
     fits.sort(key=lambda f: (f.effect != verdict, f.bic))
-    return Diagnosis(verdict, baseline, fits, analysis, sigma, alpha, reason, weights, combined=combined)
+    return Diagnosis(verdict, baseline, fits, analysis, sigma, alpha, reason, weights, combined=combined, rivals=close)
 
 
 #: the closest candidate's gyro residual RMS, over the residual's white noise, above which its fit is taken to have

@@ -102,7 +102,9 @@ def summarise_matrix(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     :func:`spaceid_gym.variations.axis_label`): ``logs``; ``eligible``: logs whose expected power is at least
     :data:`ELIGIBLE_POWER` (a clean log: every one; a log whose power is unknown, not); ``correct``: eligible logs whose
     verdict names the hidden effect (clean logs: ``none``), ``correct_percent`` of the eligible (NaN without any);
-    ``rms_over_noise_after_mean`` over the correct ones; ``wall_time_s_mean`` over the logs that ran."""
+    ``undecided``: eligible logs named wrongly but with the hidden effect among the verdict's rivals (the log hardly
+    tells them apart, :func:`~estimators.diagnostics.verdict.rivals`); ``rms_over_noise_after_mean`` over the correct
+    ones; ``wall_time_s_mean`` over the logs that ran."""
     out = []
     for effect in dict.fromkeys(r["effect"] for r in rows):
         group = [r for r in rows if r["effect"] == effect]
@@ -134,6 +136,7 @@ def _matrix_cell(effect: str, axis: str, value: str, rows: list[dict[str, Any]])
         "eligible": len(eligible),
         "correct": len(correct),
         "correct_percent": 100.0 * len(correct) / len(eligible) if eligible else math.nan,
+        "undecided": sum(1 for r in eligible if not r["correct"] and r["effect"] in str(r.get("rivals", "")).split(";")),
         "rms_over_noise_after_mean": float(np.mean([r["rms_over_noise_after"] for r in correct])) if correct else math.nan,
         "rms_over_noise_after_max": float(np.max([r["rms_over_noise_after"] for r in correct])) if correct else math.nan,
         "fuel_z_rms_after": _fuel_z_rms(correct),
@@ -166,13 +169,15 @@ def matrix_markdown(summary: list[dict[str, Any]]) -> str:
         f"Eligible: expected power of the effect's test >= {ELIGIBLE_POWER:g} (clean logs: all); correct: the verdict "
         "names the hidden effect (clean logs: none).",
         "",
-        "| hidden effect | logs | eligible | correct | RMS/noise after: mean, max | fuel z RMS after | s/log |",
-        "|---|---|---|---|---|---|---|",
+        "| hidden effect | logs | eligible | correct | wrong, truth a rival | RMS/noise after: mean, max | fuel z RMS after "
+        "| s/log |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for effect in effects:
         s = entries[(effect, "all", "all")]
         lines.append(
-            f"| {effect} | {s['logs']} | {s['eligible']} | {_fraction_cell(s)} | {s['rms_over_noise_after_mean']:.3f}, "
+            f"| {effect} | {s['logs']} | {s['eligible']} | {_fraction_cell(s)} | {s['undecided']} | "
+            f"{s['rms_over_noise_after_mean']:.3f}, "
             f"{s['rms_over_noise_after_max']:.3f} | {s['fuel_z_rms_after']:.2f} | {s['wall_time_s_mean']:.1f} |"
         )
     for axis in AXES:

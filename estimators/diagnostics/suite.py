@@ -115,6 +115,7 @@ def diagnosed_cells(env: FreeFloatingIDEnv, effect: str) -> dict[str, Any]:
         "verdict": diagnosis.verdict,
         "correct": diagnosis.verdict == effect,
         "runner_up": next((c.effect for c in diagnosis.candidates if c.effect != diagnosis.verdict), ""),
+        "rivals": ";".join(str(f.effect) for f, _ in diagnosis.rivals),
         "rms_over_noise_before": diagnosis.baseline.residual_rms_rad_s / noise,
     }
     before = None
