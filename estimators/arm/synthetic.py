@@ -34,6 +34,7 @@ from numpy.typing import NDArray
 from estimators.arm.consistency import PhysicalConsistency
 from estimators.arm.linear_problem import LinearIdentificationProblem, image_box
 from estimators.parameters import PARAMS10_NAMES
+from spaceid_gym.arm.excitation_design import FourierTrajectory
 from spaceid_gym.arrays import FloatArray
 
 IntArray = NDArray[np.intp]
@@ -78,18 +79,15 @@ def fourier_trajectory(
     base_frequency_hz: float = 0.1,
     rate_amplitude_rad_s: float = 1.0,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Joint angles (rad), rates (rad/s) and accelerations (rad/s^2), each (n_samples, 6), of a random Fourier excitation.
+    """Joint angles (rad), rates (rad/s) and accelerations (rad/s^2), each (n_samples, 6), of a random
+    :class:`~spaceid_gym.arm.excitation_design.FourierTrajectory` sampled from t = 0 every ``dt_s``.
 
-    Coefficients ``a, b ~ N(0, (rate_amplitude / n_harmonics)^2)`` per joint and harmonic; start angles ``U(-1, 1)`` rad.
+    Coefficients ``a, b ~ N(0, (rate_amplitude / n_harmonics)^2)`` per joint and harmonic; mean angles ``q0 ~ U(-1, 1)`` rad.
     """
-    t = np.arange(n_samples) * dt_s
-    w = 2.0 * np.pi * base_frequency_hz * np.arange(1, n_harmonics + 1)
     a, b = rng.normal(scale=rate_amplitude_rad_s / n_harmonics, size=(2, N_JOINTS, n_harmonics))
-    sin, cos = np.sin(np.outer(t, w)), np.cos(np.outer(t, w))
-    q = (sin / w) @ a.T - (cos / w) @ b.T + rng.uniform(-1.0, 1.0, N_JOINTS)
-    dq = cos @ a.T + sin @ b.T
-    ddq = -(sin * w) @ a.T + (cos * w) @ b.T
-    return q, dq, ddq
+    q0 = rng.uniform(-1.0, 1.0, N_JOINTS)
+    trajectory = FourierTrajectory(N_JOINTS, n_harmonics, base_frequency_hz, np.stack((a, b), axis=1), q0)
+    return trajectory.state(np.arange(n_samples) * dt_s)
 
 
 def arm_regressor(model: pin.Model, q: FloatArray, dq: FloatArray, ddq: FloatArray) -> FloatArray:
