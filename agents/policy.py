@@ -57,12 +57,11 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv, VecNormalize
 from tqdm import tqdm
 
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.envs.free_floating import FreeFloatingIDEnv
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.mission import FuelSchedule
 from spaceid_gym.robots import Robot, load_robot
-
-FloatArray = NDArray[np.float64]
 
 #: the agent decides this often, s
 DECISION_PERIOD_S = 0.5

@@ -43,8 +43,8 @@ from estimators.arm.identification import (
 )
 from estimators.arm.model import ArmIdentificationModel, IdentificationRows
 from estimators.evaluation import estimator_from_spec
-from spaceid_gym.arm.datasets import simulate_train_and_held_out
-from spaceid_gym.arm.robot import load_arm
+from spaceid_gym.arm.arm_robot import load_arm
+from spaceid_gym.arm.simulated_arm_datasets import simulate_train_and_held_out
 from spaceid_gym.arm_cli import parse_friction
 from spaceid_gym.errors import SpaceIdInputError
 

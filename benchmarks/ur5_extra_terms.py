@@ -28,7 +28,7 @@ from ur5_colony_vs_sdp import UNDISTURBED
 
 from estimators.arm.identification import Preparation, load_movements
 from estimators.arm.model import ArmIdentificationModel, IdentificationRows
-from spaceid_gym.arm.robot import load_arm
+from spaceid_gym.arm.arm_robot import load_arm
 from spaceid_gym.arm_cli import parse_friction
 from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError

@@ -30,8 +30,8 @@ from estimators.arm.identification import Preparation, fit, physically_consisten
 from estimators.arm.linear_problem import LinearIdentificationProblem
 from estimators.arm.model import ArmIdentificationModel
 from estimators.evaluation import estimator_from_spec
-from spaceid_gym.arm.datasets import simulate_train_and_held_out
-from spaceid_gym.arm.robot import load_arm
+from spaceid_gym.arm.arm_robot import load_arm
+from spaceid_gym.arm.simulated_arm_datasets import simulate_train_and_held_out
 
 FRICTION = ("coulomb", "viscous")
 

@@ -12,13 +12,13 @@ from typing import Any
 
 import numpy as np
 
+from estimators.arm.arm_diagnosis import diagnose_arm, where_it_fails
 from estimators.arm.controller_model import (
     CONTROLLER_FRICTION,
     controller_estimator_label,
     controller_model_leave_one_out,
     load_controller_rows,
 )
-from estimators.arm.diagnose import diagnose_arm, where_it_fails
 from estimators.arm.gains import identify_gains, scaled_rows
 from estimators.arm.identification import (
     Preparation,
@@ -35,10 +35,10 @@ from estimators.arm.identification import (
 from estimators.arm.model import ArmIdentificationModel
 from estimators.diagnostics.plots import plot_overlay
 from estimators.evaluation import estimator_from_spec, parse_estimator_specs
-from spaceid_gym.arm.datasets import simulate_arm_dataset  # the optimiser and simulator load only when used
+from spaceid_gym.arm.arm_robot import load_arm
 from spaceid_gym.arm.friction import FRICTION_TERMS
 from spaceid_gym.arm.joint_sensors import ArmSensorModel
-from spaceid_gym.arm.robot import load_arm
+from spaceid_gym.arm.simulated_arm_datasets import simulate_arm_dataset  # the optimiser and simulator load only when used
 from spaceid_gym.arm.torque_simulator import INTERNAL_RATE_HZ, SAMPLE_RATE_HZ
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.executors import add_executor_arguments, executor_from_arguments

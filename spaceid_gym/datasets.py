@@ -14,6 +14,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import NDArray
 
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.effects.settings import HiddenEffects
 from spaceid_gym.envs.free_floating import FreeFloatingIDEnv
 from spaceid_gym.limits import check_log_size
@@ -42,7 +43,7 @@ def simulate_episode(
     robot: Robot,
     duration_s: float,
     fuel_consumed_kg: float,
-    tank_position_m: NDArray[np.float64],
+    tank_position_m: FloatArray,
     excitation: Excitation | FeedbackExcitation,
     seed: int,
     sensors: SensorModel | None = None,

@@ -48,6 +48,7 @@ from numpy.typing import NDArray
 from threadpoolctl import threadpool_limits
 
 from spaceid_gym.arm.excitation_design import FourierTrajectory
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.information import ExcitationMeasures, excitation_measures
 from spaceid_gym.mission import FuelSchedule
@@ -56,8 +57,6 @@ from spaceid_gym.physics.momentum import base_parameter_directions
 from spaceid_gym.robots import Robot
 from spaceid_gym.sim.sensors import SensorModel
 from spaceid_gym.sim.servo import default_servo
-
-FloatArray = NDArray[np.float64]
 
 #: the env's initial joint angles lie within this of the middle of each range, rad
 START_SPREAD_RAD = 0.3

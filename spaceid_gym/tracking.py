@@ -56,13 +56,13 @@ from typing import Any
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
-from numpy.typing import NDArray
 from scipy.stats import chi2
 
 from estimators.estimate import Estimate
 from estimators.evaluation import estimator_from_spec
 from estimators.problem import IdentificationModel, IdentificationProblem
 from estimators.ukf import UKFTracker, UnscentedKalman
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.envs.free_floating import FreeFloatingIDEnv
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.excitation import FourierExcitation
@@ -71,8 +71,6 @@ from spaceid_gym.limits import check_count, check_log_size
 from spaceid_gym.log import MeasurementLog, write_bytes_atomic, write_csv_atomic, write_json_atomic
 from spaceid_gym.mission import FuelSchedule
 from spaceid_gym.robots import load_robot
-
-FloatArray = NDArray[np.float64]
 
 #: the most windows one mission may have
 MAX_WINDOWS = 1000

@@ -144,12 +144,14 @@ def test_principal_axis_moves_follow_the_colony() -> None:
 
 
 def test_improved_abc_beats_classic_abc_at_equal_evaluations(bench: ArmBenchmark) -> None:
-    """Arm problem (50 base parameters, 2400 rows), 20 000 evaluations, 3 seeds: the improved colony ends closer to the
-    truth in Cramér-Rao units on every seed and lower in cost (measured: classic 50-103, improved 21-33 Cramér-Rao std)."""
+    """Arm problem (50 base parameters, 2400 rows), 50 000 evaluations, 3 seeds: the improved colony ends closer to the
+    truth in Cramér-Rao units on every seed and lower in cost. Measured over colony seeds 0-11: lower error and cost on
+    12 of 12, classic 3.9-20, improved 1.0-2.7 Cramér-Rao std, median ratio 0.15. At 20 000 evaluations both colonies
+    are still far off (7.6-63) and the improved one is ahead on only 10 of 12 seeds, too few for "every seed"."""
     errors = []
     for seed in range(3):
-        classic = ArtificialBeeColony(max_evaluations=20_000, seed=seed).fit_problem(bench.problem)
-        improved = ImprovedABC(max_evaluations=20_000, seed=seed).fit_problem(bench.problem)
+        classic = ArtificialBeeColony(max_evaluations=50_000, seed=seed).fit_problem(bench.problem)
+        improved = ImprovedABC(max_evaluations=50_000, seed=seed).fit_problem(bench.problem)
         errors.append((bench.parameter_error(classic.theta), bench.parameter_error(improved.theta)))
         assert improved.cost < classic.cost
     errors_array = np.array(errors)

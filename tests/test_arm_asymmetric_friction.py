@@ -8,15 +8,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from estimators.arm.diagnose import ArmDiagnosis, diagnose_arm, extended_model
+from estimators.arm.arm_diagnosis import ArmDiagnosis, diagnose_arm, extended_model
 from estimators.arm.identification import Preparation, leave_one_out, load_movements, summary_table
 from estimators.arm.model import ArmIdentificationModel
 from estimators.evaluation import estimator_from_spec
-from spaceid_gym.arm.datasets import simulate_arm_dataset
+from spaceid_gym.arm.arm_robot import load_arm
 from spaceid_gym.arm.friction import FrictionModel
 from spaceid_gym.arm.parameter_prior import COULOMB_ASYMMETRY, default_friction_coefficients
 from spaceid_gym.arm.real_logs import list_movements
-from spaceid_gym.arm.robot import load_arm
+from spaceid_gym.arm.simulated_arm_datasets import simulate_arm_dataset
 from spaceid_gym.errors import SpaceIdInputError
 
 UR5_REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "ur5-real"

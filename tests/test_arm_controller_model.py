@@ -19,9 +19,9 @@ from estimators.arm.controller_model import (
 )
 from estimators.arm.identification import Preparation, load_movements
 from estimators.arm.model import ArmIdentificationModel
+from spaceid_gym.arm.arm_robot import load_arm
 from spaceid_gym.arm.friction import FrictionModel
 from spaceid_gym.arm.joint_log import ArmLog
-from spaceid_gym.arm.robot import load_arm
 from spaceid_gym.cli import main
 from spaceid_gym.errors import SpaceIdInputError
 

@@ -13,10 +13,10 @@ import pytest
 from estimators.arm.gains import identify_gains, scaled_rows
 from estimators.arm.identification import Preparation
 from estimators.arm.model import ArmIdentificationModel
-from spaceid_gym.arm.datasets import simulate_arm_dataset
+from spaceid_gym.arm.arm_robot import load_arm
 from spaceid_gym.arm.joint_sensors import ArmSensorModel
 from spaceid_gym.arm.real_logs import UR5_TORQUE_CONSTANTS_NM_A
-from spaceid_gym.arm.robot import load_arm
+from spaceid_gym.arm.simulated_arm_datasets import simulate_arm_dataset
 from spaceid_gym.cli import main
 from spaceid_gym.errors import SpaceIdInputError
 

@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from estimators.arm.arm_diagnosis import diagnose_arm, where_it_fails
 from estimators.arm.consistency import params10_from_pseudo_inertia, pseudo_inertia
-from estimators.arm.diagnose import diagnose_arm, where_it_fails
 from estimators.arm.identification import (
     Preparation,
     fit,
@@ -27,10 +27,10 @@ from estimators.arm.linear_problem import LinearIdentificationProblem
 from estimators.arm.model import ArmIdentificationModel
 from estimators.arm.synthetic import last_link_problem
 from estimators.evaluation import estimator_from_spec
-from spaceid_gym.arm.datasets import simulate_arm_dataset
+from spaceid_gym.arm.arm_robot import load_arm
 from spaceid_gym.arm.joint_sensors import ArmSensorModel
-from spaceid_gym.arm.robot import load_arm
 from spaceid_gym.arm.signal import lowpass_zero_phase, prepare_for_identification
+from spaceid_gym.arm.simulated_arm_datasets import simulate_arm_dataset
 from spaceid_gym.cli import main
 from spaceid_gym.errors import SpaceIdInputError
 

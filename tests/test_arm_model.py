@@ -12,7 +12,7 @@ import pinocchio as pin
 import pytest
 
 from spaceid_gym.arm import ArmRegressor, BaseParameterSet, FrictionModel, load_arm, stack
-from spaceid_gym.arm.robot import arm_from_urdf_text
+from spaceid_gym.arm.arm_robot import arm_from_urdf_text
 from spaceid_gym.errors import SpaceIdInputError
 
 # UR5 (CB3) DH table and dynamics from UR's "DH parameters for calculations of kinematics and dynamics"

@@ -15,7 +15,7 @@ from estimators.arm.consistent_polish import trust_region_step
 from estimators.arm.identification import Preparation, fit, load_movements
 from estimators.arm.model import ArmIdentificationModel
 from estimators.evaluation import estimator_from_spec
-from spaceid_gym.arm.robot import load_arm
+from spaceid_gym.arm.arm_robot import load_arm
 
 UR5_REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "ur5-real"
 #: leave-one-out fold of the real logs that ended at different points run to run with scipy's trust-krylov polish
@@ -34,7 +34,7 @@ import numpy as np
 from estimators.arm.identification import Preparation, fit, load_movements
 from estimators.arm.model import ArmIdentificationModel
 from estimators.evaluation import estimator_from_spec
-from spaceid_gym.arm.robot import load_arm
+from spaceid_gym.arm.arm_robot import load_arm
 folder, spec, out, *names = sys.argv[1:]
 model = ArmIdentificationModel.build(load_arm("ur5"), ("coulomb", "viscous"), armature=True)
 rows = Preparation().all_rows(model, load_movements(folder, names))

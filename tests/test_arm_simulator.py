@@ -15,11 +15,11 @@ import pinocchio as pin
 import pytest
 
 from spaceid_gym.arm import ArmLog, ArmRegressor, load_arm
-from spaceid_gym.arm.datasets import simulate_arm_dataset
 from spaceid_gym.arm.excitation_design import FourierTrajectory, random_fourier_trajectory
 from spaceid_gym.arm.joint_sensors import ArmSensorModel
 from spaceid_gym.arm.parameter_prior import ParameterPrior, default_friction_coefficients
 from spaceid_gym.arm.real_logs import UR5_TORQUE_CONSTANTS_NM_A
+from spaceid_gym.arm.simulated_arm_datasets import simulate_arm_dataset
 from spaceid_gym.arm.torque_simulator import ArmSimulator, TrackingController
 from spaceid_gym.arm_cli import add_arm_simulate_arguments, parse_friction, run_arm_simulate
 from spaceid_gym.errors import SpaceIdInputError

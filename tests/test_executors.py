@@ -15,7 +15,7 @@ from estimators import evaluation
 from estimators.arm.identification import Preparation, leave_one_out, load_movements
 from estimators.arm.model import ArmIdentificationModel
 from estimators.evaluation import draw_settings, estimator_from_spec, run_evaluation
-from spaceid_gym.arm.robot import load_arm
+from spaceid_gym.arm.arm_robot import load_arm
 from spaceid_gym.cli import main
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.executors import (

@@ -30,7 +30,7 @@ from estimators.arm.synthetic import (
     N_JOINTS,
     NOISE_STD,
     ArmBenchmark,
-    arm_base_map,
+    arm_base_parameters,
     arm_benchmark,
     arm_regressor,
     fourier_trajectory,
@@ -77,7 +77,8 @@ def test_fourier_trajectory_derivatives_are_consistent() -> None:
 def test_base_map_reproduces_the_full_regressor_on_new_states() -> None:
     """Y[:, independent] K = Y on states not used to find K; 50 base parameters for this arm."""
     model = sample_model()
-    k_map, independent = arm_base_map(model)
+    base = arm_base_parameters(model)
+    k_map, independent = base.K, base.independent
     assert k_map.shape == (50, 12 * N_JOINTS)
     q, dq, ddq = fourier_trajectory(np.random.default_rng(8), 30)
     y = arm_regressor(model, q, dq, ddq).reshape(-1, 12 * N_JOINTS)
@@ -129,7 +130,8 @@ def test_ols_is_exact_on_noise_free_data() -> None:
     """Noise-free torques from pinocchio's RNEA: OLS recovers the true base parameters to 1e-10 (relative)."""
     model = sample_model()
     data = model.createData()
-    k_map, independent = arm_base_map(model)
+    base = arm_base_parameters(model)
+    k_map, independent = base.K, base.independent
     rng = np.random.default_rng(5)
     q, dq, ddq = fourier_trajectory(rng, 100)
     y = arm_regressor(model, q, dq, ddq).reshape(-1, 12 * N_JOINTS)[:, independent]
@@ -274,7 +276,7 @@ def test_inconsistent_bodies_are_flagged() -> None:
 def test_physical_consistency_layout_and_box() -> None:
     model = sample_model()
     truth = true_full_parameters(model)
-    k_map, _ = arm_base_map(model)
+    k_map = arm_base_parameters(model).K
     consistency = PhysicalConsistency.per_joint(
         N_JOINTS, mass_range_kg=(0.01, 2.0), size_m=1.0, friction_upper=(2.0, 1.0), base_map=k_map
     )

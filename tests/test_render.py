@@ -5,15 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
-from numpy.typing import NDArray
 
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.envs.render import RobotRenderer, base_half_extents_from_inertia, render_rgb, rpy_from_matrix
 from spaceid_gym.robots.robot import Robot, load_robot
 
 WIDTH, HEIGHT = 240, 200
 
 
-def _q_full(robot: Robot, q_arm: NDArray[np.float64], rot_wb: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
+def _q_full(robot: Robot, q_arm: FloatArray, rot_wb: FloatArray | None = None) -> FloatArray:
     """pinocchio configuration with the base at the origin, attitude ``rot_wb`` (default identity)."""
     rot = np.eye(3) if rot_wb is None else rot_wb
     quat = pin.Quaternion(rot)  # coeffs are (x, y, z, w)

@@ -25,9 +25,9 @@ from estimators.arm.model import ArmIdentificationModel, IdentificationRows
 from estimators.arm.sdp import SemidefiniteLeastSquares, consistent_optimum
 from estimators.arm.synthetic import arm_benchmark, last_link_problem
 from estimators.evaluation import estimator_from_spec
-from spaceid_gym.arm.datasets import simulate_arm_dataset
+from spaceid_gym.arm.arm_robot import load_arm
 from spaceid_gym.arm.joint_sensors import ArmSensorModel
-from spaceid_gym.arm.robot import load_arm
+from spaceid_gym.arm.simulated_arm_datasets import simulate_arm_dataset
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.physics.inertia import RigidBodyInertia
 

@@ -8,7 +8,7 @@
 * the estimators of the linear problem: :mod:`.linear_ls` (``ols``, ``wls``), :mod:`.sdp` (``sdp``) and
   :mod:`.improved_abc` (``abc``, ``improved-abc``);
 * :mod:`.identification`: movements to rows, fits, torque-prediction error and leave-one-out validation;
-* :mod:`.diagnose`: what the arm model misses and where;
+* :mod:`.arm_diagnosis`: what the arm model misses and where;
 * :mod:`.synthetic`: a synthetic arm with a known truth (tests and benchmarks).
 
 The robot, its regressor, friction, logs and simulator (the physics) are in :mod:`spaceid_gym.arm`.

@@ -38,12 +38,13 @@ measured best:
 1. ``principal_axes`` (on): with probability ``principal_probability`` (0.3) a bee moves along one of
    the colony's principal axes instead of one coordinate: ``b`` a random right singular vector of the
    centred sources (the ``SN - 1`` informative ones), ``v = u_i + phi ((u_i - u_j) . b) b``. Inertial
-   parameters are strongly correlated (the condition number of the unit-box Hessian is ~1e7 on the
-   benchmark problem): a one-coordinate step must stay inside the narrow conditional width of the
+   parameters are strongly correlated (the condition number of the unit-box Hessian is ~2e6 on the
+   benchmark problem, which prints it): a one-coordinate step must stay inside the narrow conditional width of the
    cost's valley, while the colony's spread lines up with the valley, so steps along its axes are not
    limited by the correlation (the idea of eigenvector-based crossover, Guo and Yang 2015). The
    coordinate moves stay: the colony's axes only span its own affine hull. The probability was
-   chosen by measurement (0.1, 0.2, 0.3, 0.5, 0.7 at 50 000 evaluations: 0.3 lowest error).
+   chosen by measurement on the former base parameters (0.1, 0.2, 0.3, 0.5, 0.7 at 50 000 evaluations:
+   0.3 lowest error; not measured again).
 2. ``scaled_fitness`` (on): onlookers choose with fitness ``1 / (1 + (f_i - min f) / (median f - min f))``
    instead of ``1 / (1 + f)``, which depends on the cost's unit and flattens to uniform selection once
    all costs are small against 1 (here near the optimum every classic fitness is ``~1 / (1 + noise^2)``).
@@ -58,23 +59,29 @@ measured best:
    finely, a poor one takes up to twice the classic step, towards and past its better partner);
    ``eps`` keeps the best source (``e = 0``) moving (large ``a``: ``F -> 1``, the classic step).
    Measured, it does **not** help on the arm problem, so it is off by default: on top of the changes
-   above it ends at the same error at 200 000 evaluations but a larger one at 100 000 (1.32 against 0.99
-   Cramér-Rao std, mean of 16 seeds, worse on 12 of them) and at 50 000 (figures below); alone on the
-   classic colony it is within the seed-to-seed spread. It does help on the 4-parameter nonlinear fuel problem of the free-floating
+   above it ends at the same error at 200 000 evaluations but a larger one at 100 000 (1.05 against 0.98
+   Cramér-Rao std, mean of 16 seeds: ``benchmarks/abc_ablation.py --seeds 16 --evaluations 100000``) and at
+   50 000 (figures below); alone on the classic colony it lowers the error somewhat (2.6 against 3.4 at
+   100 000). It does help on the 4-parameter nonlinear fuel problem of the free-floating
    robot (2000 evaluations, 12 seeds: median 2.6 chi-square units above the maximum-likelihood fit,
    worst 13, against 4.6 and 54 without it), where the colony collapses early and the finer steps of
    good sources pay. Other definitions tried on the arm did not help either (a fitness-rank ratio
    ``((1 + r_i) / (1 + r_j))^a`` with a = 0.5, 1, 2; a cost ratio; a success-rule step; a step growing
    with the trial counter; each on one or both move types).
 4. ``gbest_guided`` (off): Zhu and Kwong's (2010) term ``+ psi (u_best,d - u_id)``,
-   ``psi ~ U(0, gbest_weight)``, pulling every move towards the best source: faster in the first few
-   thousand evaluations, slower after (it collapses the colony sooner); see the figures below.
+   ``psi ~ U(0, gbest_weight)``, pulling every move towards the best source. It was slower than the
+   default after the first few thousand evaluations on the base parameters of the synthetic arm's former
+   pivoted QR (4.4 against 3.2 Cramér-Rao std at 50 000); on the current ones it is slightly ahead at
+   50 000 (1.6 against 1.8, mean of 10 seeds) and slightly behind at 100 000 (1.03 against 0.98, 16 seeds);
+   it stays off, no clear gain either way; see the figures below.
 
 Measured (``benchmarks/abc_ablation.py``, 10 seeds; RMS error of the 50 base parameters in Cramér-Rao
-std, mean; WLS 0.98): at 50 000 evaluations classic ABC 36.1, improved ABC 3.2, without the principal
-axes 39.6, without the scaled fitness 7.2, with ``F_ij`` 4.8, with gbest guidance 4.4; at 200 000 the
-improved ABC reaches the WLS error (0.98, held-out torque error 1.007 x the noise like WLS) with or
-without the optional changes, while the classic colony is at 26.7 (held-out 3.8 x the noise).
+std, mean; WLS 0.95): at 50 000 evaluations classic ABC 11.2, improved ABC 1.8, without the principal
+axes 12.3, without the scaled fitness 3.9, with ``F_ij`` 3.6, with gbest guidance 1.6; at 200 000 the
+improved ABC reaches the WLS error (0.95, held-out torque error 1.007 x the noise like WLS) with or
+without the optional changes, and the classic colony is close (1.40, held-out 1.019 x the noise). On the
+synthetic arm's former base parameters (its own pivoted QR), which made one-coordinate moves much harder,
+the classic colony was still at 26.7 after 200 000 evaluations (the benchmark's docstring says more).
 
 Physically consistent variant: ``consistent=True`` (either class) searches the log-Cholesky coordinates
 of the problem's :class:`~estimators.arm.consistency.PhysicalConsistency` (the box from

@@ -33,11 +33,11 @@ from threadpoolctl import threadpool_limits
 
 from estimators.arm.consistency import PhysicalConsistency
 from estimators.arm.linear_problem import LinearIdentificationProblem, image_box
+from spaceid_gym.arm.arm_robot import ArmRobot
 from spaceid_gym.arm.friction import FrictionModel
 from spaceid_gym.arm.joint_log import ArmLog
 from spaceid_gym.arm.real_logs import UR5_TORQUE_CONSTANTS_NM_A
 from spaceid_gym.arm.regressor import ArmRegressor, BaseParameterSet
-from spaceid_gym.arm.robot import ArmRobot
 from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 

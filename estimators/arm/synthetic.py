@@ -11,9 +11,10 @@ known truth:
   rows sample-major (sample t, joint j is row ``n t + j``);
 * excitation: a finite Fourier series per joint (Swevers et al. 1997), ``dq_j(t) = sum_h a_jh cos(w_h t)
   + b_jh sin(w_h t)`` with ``w_h = 2 pi h f0``; ``q`` and ``ddq`` its exact integral and derivative;
-* base parameters: a pivoted QR of the regressor stacked over random states gives the independent
-  columns and ``K`` with ``Y theta_full = Y[:, independent] (K theta_full)`` (Gautier 1990's numerical
-  method); 50 base parameters for this arm;
+* base parameters: :class:`~spaceid_gym.arm.regressor.BaseParameterSet` of the regressor stacked over
+  random states (the UR5's QR: rank by pivoted QR, independent columns in the natural parameter order)
+  gives the independent columns and ``K`` with ``Y theta_full = Y[:, independent] (K theta_full)``
+  (Gautier 1990's numerical method); 50 base parameters for this arm;
 * noise: white Gaussian per joint, ``NOISE_STD`` (about 2 % of each joint's torque RMS on the default
   excitation);
 * search box: per link mass ``[0, 2]`` kg, first moments ``+-2`` kg m, diagonal inertia ``[0, 4]`` kg m^2,
@@ -28,12 +29,13 @@ from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
-import scipy.linalg
 from numpy.typing import NDArray
 
 from estimators.arm.consistency import PhysicalConsistency
 from estimators.arm.linear_problem import LinearIdentificationProblem, image_box
 from estimators.parameters import PARAMS10_NAMES
+from spaceid_gym.arm.excitation_design import FourierTrajectory
+from spaceid_gym.arm.regressor import BaseParameterSet
 from spaceid_gym.arrays import FloatArray
 
 IntArray = NDArray[np.intp]
@@ -78,18 +80,15 @@ def fourier_trajectory(
     base_frequency_hz: float = 0.1,
     rate_amplitude_rad_s: float = 1.0,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Joint angles (rad), rates (rad/s) and accelerations (rad/s^2), each (n_samples, 6), of a random Fourier excitation.
+    """Joint angles (rad), rates (rad/s) and accelerations (rad/s^2), each (n_samples, 6), of a random
+    :class:`~spaceid_gym.arm.excitation_design.FourierTrajectory` sampled from t = 0 every ``dt_s``.
 
-    Coefficients ``a, b ~ N(0, (rate_amplitude / n_harmonics)^2)`` per joint and harmonic; start angles ``U(-1, 1)`` rad.
+    Coefficients ``a, b ~ N(0, (rate_amplitude / n_harmonics)^2)`` per joint and harmonic; mean angles ``q0 ~ U(-1, 1)`` rad.
     """
-    t = np.arange(n_samples) * dt_s
-    w = 2.0 * np.pi * base_frequency_hz * np.arange(1, n_harmonics + 1)
     a, b = rng.normal(scale=rate_amplitude_rad_s / n_harmonics, size=(2, N_JOINTS, n_harmonics))
-    sin, cos = np.sin(np.outer(t, w)), np.cos(np.outer(t, w))
-    q = (sin / w) @ a.T - (cos / w) @ b.T + rng.uniform(-1.0, 1.0, N_JOINTS)
-    dq = cos @ a.T + sin @ b.T
-    ddq = -(sin * w) @ a.T + (cos * w) @ b.T
-    return q, dq, ddq
+    q0 = rng.uniform(-1.0, 1.0, N_JOINTS)
+    trajectory = FourierTrajectory(N_JOINTS, n_harmonics, base_frequency_hz, np.stack((a, b), axis=1), q0)
+    return trajectory.state(np.arange(n_samples) * dt_s)
 
 
 def arm_regressor(model: pin.Model, q: FloatArray, dq: FloatArray, ddq: FloatArray) -> FloatArray:
@@ -106,31 +105,16 @@ def arm_regressor(model: pin.Model, q: FloatArray, dq: FloatArray, ddq: FloatArr
     return out.transpose(0, 1, 3, 2).reshape(n_samples, N_JOINTS, 12 * N_JOINTS)
 
 
-def base_parameter_map(stacked: FloatArray, rtol: float = 1e-8) -> tuple[FloatArray, IntArray]:
-    """``K`` (r, p) and the independent columns (r,) of a stacked regressor (rows, p), by pivoted QR.
+def arm_base_parameters(model: pin.Model, n_states: int = 300, seed: int = 12345) -> BaseParameterSet:
+    """The base parameters of the arm's regressor (:data:`FULL_NAMES`) at ``n_states`` random states.
 
-    ``stacked[:, independent] @ K == stacked`` (to rounding): ``Y theta = Y[:, independent] (K theta)``.
-    The rank ``r`` counts diagonal entries of ``R`` above ``rtol`` times the largest; entries of ``K``
-    below 1e-10 are set to zero.
+    Angles ``U(-pi, pi)`` rad, rates ``N(0, 2^2)`` rad/s, accelerations ``N(0, 5^2)`` rad/s^2, from ``seed``.
     """
-    _, r_factor, pivot = scipy.linalg.qr(stacked, mode="economic", pivoting=True)
-    diag = np.abs(np.diag(r_factor))
-    rank = int(np.sum(diag > rtol * diag[0]))
-    beta = scipy.linalg.solve_triangular(r_factor[:rank, :rank], r_factor[:rank, rank:])
-    beta[np.abs(beta) < 1e-10] = 0.0
-    k_map = np.zeros((rank, stacked.shape[1]))
-    k_map[:, pivot[:rank]] = np.eye(rank)
-    k_map[:, pivot[rank:]] = beta
-    return k_map, pivot[:rank]
-
-
-def arm_base_map(model: pin.Model, n_states: int = 300, seed: int = 12345) -> tuple[FloatArray, IntArray]:
-    """:func:`base_parameter_map` of the arm's regressor at ``n_states`` random states (angles, rates, accelerations)."""
     rng = np.random.default_rng(seed)
     q = rng.uniform(-np.pi, np.pi, (n_states, N_JOINTS))
     dq = rng.normal(scale=2.0, size=(n_states, N_JOINTS))
     ddq = rng.normal(scale=5.0, size=(n_states, N_JOINTS))
-    return base_parameter_map(arm_regressor(model, q, dq, ddq).reshape(-1, 12 * N_JOINTS))
+    return BaseParameterSet.from_matrix(arm_regressor(model, q, dq, ddq).reshape(-1, 12 * N_JOINTS), FULL_NAMES)
 
 
 def full_box() -> tuple[FloatArray, FloatArray]:
@@ -218,7 +202,8 @@ def arm_benchmark(
     ``known_noise`` gives the problem the true ``row_std`` (else it estimates the noise per joint).
     """
     model = sample_model()
-    k_map, independent = arm_base_map(model)
+    base = arm_base_parameters(model)
+    k_map, independent = base.K, base.independent
     full_true = true_full_parameters(model)
     fit_rng, holdout_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
     data = simulate(model, full_true, fit_rng, n_samples, n_segments, noise_scale)
@@ -234,7 +219,7 @@ def arm_benchmark(
     problem = LinearIdentificationProblem(
         data.Y_full[:, independent],
         data.tau,
-        [f"base_{FULL_NAMES[i]}" for i in independent],
+        base.names,
         lower,
         upper,
         row_std=data.row_std if known_noise else None,

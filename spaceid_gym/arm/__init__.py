@@ -1,6 +1,6 @@
 """Fixed-base manipulators (the UR5 and any fixed-base serial-arm URDF): model, linear dynamics, logs.
 
-* :func:`load_arm` / :class:`ArmRobot` (:mod:`.robot`): the robot, its limits and gravity.
+* :func:`load_arm` / :class:`ArmRobot` (:mod:`.arm_robot`): the robot, its limits and gravity.
 * :class:`ArmRegressor` (:mod:`.regressor`): ``tau = Y(q, dq, ddq) p`` with per-link inertial
   parameters and per-joint friction (:class:`FrictionModel`, :mod:`.friction`);
   :class:`BaseParameterSet`: the identifiable combinations ``beta = K p``; :func:`stack`.
@@ -22,11 +22,11 @@ Typical use::
 
 from __future__ import annotations
 
+from spaceid_gym.arm.arm_robot import DEFAULT_DDQ_LIMIT_RAD_S2, ArmRobot, arm_from_urdf_text, available_arms, load_arm
 from spaceid_gym.arm.friction import FRICTION_TERMS, FrictionModel
 from spaceid_gym.arm.joint_log import ArmLog
 from spaceid_gym.arm.real_logs import UR5_TORQUE_CONSTANTS_NM_A, LoadReport, list_movements, load_ur5_movement
 from spaceid_gym.arm.regressor import ArmRegressor, BaseParameterSet, stack
-from spaceid_gym.arm.robot import DEFAULT_DDQ_LIMIT_RAD_S2, ArmRobot, arm_from_urdf_text, available_arms, load_arm
 from spaceid_gym.arm.signal import decimate, differentiate, lowpass_zero_phase, prepare_for_identification, resample_uniform
 
 __all__ = [

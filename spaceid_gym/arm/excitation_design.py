@@ -41,8 +41,8 @@ import numpy as np
 import scipy.optimize
 from threadpoolctl import threadpool_limits
 
+from spaceid_gym.arm.arm_robot import ArmRobot
 from spaceid_gym.arm.regressor import ArmRegressor, BaseParameterSet
-from spaceid_gym.arm.robot import ArmRobot
 from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 

@@ -16,9 +16,9 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from spaceid_gym.arm.arm_robot import ArmRobot
 from spaceid_gym.arm.friction import FrictionModel
 from spaceid_gym.arm.regressor import ArmRegressor, BaseParameterSet
-from spaceid_gym.arm.robot import ArmRobot
 from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 

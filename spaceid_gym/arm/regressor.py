@@ -3,7 +3,7 @@
 Parameters ``p`` (length ``10 n + k n``), in this order:
 
 * per moving body k = 1..n (body k is the link moved by joint k, frame = pinocchio's joint frame
-  k, see :mod:`spaceid_gym.arm.robot`), pinocchio's dynamic parameters of that body, about the
+  k, see :mod:`spaceid_gym.arm.arm_robot`), pinocchio's dynamic parameters of that body, about the
   frame's **origin** and in the frame's axes (not about the CoM)::
 
       linkk_mass_kg, linkk_mcx_kgm, linkk_mcy_kgm, linkk_mcz_kgm,
@@ -39,8 +39,8 @@ import pinocchio as pin
 import scipy.linalg
 from numpy.typing import NDArray
 
+from spaceid_gym.arm.arm_robot import ArmRobot
 from spaceid_gym.arm.friction import FrictionModel
-from spaceid_gym.arm.robot import ArmRobot
 from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.physics.inertia import PARAMS10_NAMES

@@ -63,6 +63,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from spaceid_gym.arm.arm_robot import ArmRobot
 from spaceid_gym.arm.chain_dynamics import (
     ChainArrays,
     SerialChain,
@@ -75,7 +76,6 @@ from spaceid_gym.arm.friction import FrictionModel
 from spaceid_gym.arm.joint_log import ArmLog
 from spaceid_gym.arm.joint_sensors import ArmSensorModel
 from spaceid_gym.arm.regressor import ArmRegressor
-from spaceid_gym.arm.robot import ArmRobot
 from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 

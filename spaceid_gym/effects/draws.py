@@ -60,7 +60,6 @@ import math
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from spaceid_gym.arrays import FloatArray
 from spaceid_gym.effects.settings import EFFECT_NAMES, SLOSH_MODELS, SLOSH_PENDULUM_AXIS, SLOSH_PENDULUM_LENGTH_M, HiddenEffects
@@ -121,7 +120,7 @@ def _random_rotation(rng: np.random.Generator) -> FloatArray:
     )
 
 
-def remaining_liquid_kg(robot: Robot, fuel_consumed_kg: float | NDArray[np.float64]) -> float | NDArray[np.float64]:
+def remaining_liquid_kg(robot: Robot, fuel_consumed_kg: float | FloatArray) -> float | FloatArray:
     """Usable fuel still in the tank (kg): ``FuelSchedule().usable_fraction`` of the full-tank base mass minus the fuel
     consumed, at least 0; for one value (a float) or many (an array of the same shape)."""
     left = FuelSchedule().usable_fraction * robot.base_full.mass_kg - np.asarray(fuel_consumed_kg, dtype=float)

@@ -6,12 +6,13 @@ import math
 
 import numpy as np
 from gymnasium import spaces
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 
 
-def checked_action(action: ArrayLike, space: spaces.Box) -> NDArray[np.float64]:
+def checked_action(action: ArrayLike, space: spaces.Box) -> FloatArray:
     """``action`` as a float array of the space's shape, finite; else :class:`SpaceIdInputError` naming what was expected.
 
     Values outside ``[-1, 1]`` are returned as given: each environment says what it does with them (clip, rate limit).

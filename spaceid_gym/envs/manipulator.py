@@ -13,12 +13,12 @@ from numba import njit
 from numpy.typing import NDArray
 from threadpoolctl import threadpool_limits
 
+from spaceid_gym.arm.arm_robot import ArmRobot, load_arm
 from spaceid_gym.arm.friction import FrictionModel
 from spaceid_gym.arm.joint_log import ArmLog
 from spaceid_gym.arm.joint_sensors import ArmSensorModel
 from spaceid_gym.arm.parameter_prior import ParameterPrior, nominal_parameters
 from spaceid_gym.arm.regressor import ArmRegressor, BaseParameterSet
-from spaceid_gym.arm.robot import ArmRobot, load_arm
 from spaceid_gym.arm.torque_simulator import ArmSimulator, TrackingController
 from spaceid_gym.arrays import FloatArray
 from spaceid_gym.envs.actions import checked_action
@@ -117,7 +117,7 @@ class ManipulatorIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     ``penalty_joint_limit``, ``penalty_torque_limit``, ``log_det_fisher``.
 
     ## Arguments
-    ``robot`` (``"ur5"``, a URDF path or an :class:`~spaceid_gym.arm.robot.ArmRobot`), ``action_mode``
+    ``robot`` (``"ur5"``, a URDF path or an :class:`~spaceid_gym.arm.arm_robot.ArmRobot`), ``action_mode``
     (``"rate"`` or ``"acceleration"``, see *Action Space*), ``friction``
     (terms, default Coulomb + viscous), ``control_period_s`` (0.008), ``internal_rate_hz`` (RK4
     rate, default 500 Hz, 14700 env steps/s of CPU time against 10900 at 1 kHz on the 2-core test machine; over

@@ -1,4 +1,4 @@
-"""Which joint effect is the arm model missing, and where does it fail? The fixed-base counterpart of :mod:`.diagnose`.
+"""Which joint effect is the arm model missing, and where does it fail? The fixed-base counterpart of :mod:`estimators.diagnostics.diagnose`.
 
 :func:`diagnose_arm` fits the model as it is and, for each candidate joint term not in it, the model with that term
 added (every fit by least squares on the same prepared training movements, rows weighted by fixed per-joint noise

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from spaceid_gym.arm.arm_robot import ArmRobot, load_arm
 from spaceid_gym.arm.excitation_design import (
     FourierTrajectory,
     optimise_excitation,
@@ -35,7 +36,6 @@ from spaceid_gym.arm.friction import FrictionModel
 from spaceid_gym.arm.joint_sensors import ArmSensorModel
 from spaceid_gym.arm.parameter_prior import ParameterPrior
 from spaceid_gym.arm.regressor import ArmRegressor, BaseParameterSet
-from spaceid_gym.arm.robot import ArmRobot, load_arm
 from spaceid_gym.arm.torque_simulator import INTERNAL_RATE_HZ, SAMPLE_RATE_HZ, ArmSimulation, ArmSimulator
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.log import write_dataset

@@ -23,7 +23,6 @@ from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
-from numpy.typing import NDArray
 
 from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
@@ -121,8 +120,8 @@ class ArmRobot:
 def load_arm(
     spec: str | Path,
     *,
-    ddq_limit_rad_s2: float | NDArray[np.float64] | None = None,
-    gravity_m_s2: tuple[float, float, float] | NDArray[np.float64] = GRAVITY_M_S2,
+    ddq_limit_rad_s2: float | FloatArray | None = None,
+    gravity_m_s2: tuple[float, float, float] | FloatArray = GRAVITY_M_S2,
 ) -> ArmRobot:
     """Load a shipped arm by name (``"ur5"``) or a fixed-base serial-arm URDF by path.
 
@@ -158,8 +157,8 @@ def arm_from_urdf_text(
     text: str,
     source: str = "<string>",
     *,
-    ddq_limit_rad_s2: float | NDArray[np.float64] | None = None,
-    gravity_m_s2: tuple[float, float, float] | NDArray[np.float64] = GRAVITY_M_S2,
+    ddq_limit_rad_s2: float | FloatArray | None = None,
+    gravity_m_s2: tuple[float, float, float] | FloatArray = GRAVITY_M_S2,
 ) -> ArmRobot:
     """Build an :class:`ArmRobot` from URDF text; ``source`` names it in error messages (see :func:`load_arm`)."""
     root = parse_urdf_root(text, source)
