@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 import pytest
+from scipy.linalg import solve_banded
 from scipy.stats import chi2
 
 from estimators.attitude_channel import (
@@ -25,7 +26,13 @@ from estimators.attitude_channel import (
     min_coupling_samples,
     truncation_shape,
 )
-from estimators.attitude_noise import AttitudeNoise, _negative_log_likelihood, fit_attitude_noise
+from estimators.attitude_noise import (
+    AttitudeNoise,
+    _filtered_factor,
+    _negative_log_likelihood,
+    _whitened_terms,
+    fit_attitude_noise,
+)
 from estimators.diagnostics.diagnose import (
     NO_MISSING_EFFECT,
     attitude_gyro_dependence,
@@ -246,6 +253,20 @@ def test_the_error_models_fit_survives_a_simplex_that_wanders_far() -> None:
     assert np.isfinite(_negative_log_likelihood(np.array([-800.0, -1e5]), d))
     noise = fit_attitude_noise(np.zeros((200, 3)))
     assert max(noise.white_std_rad) <= 1e-9 and max(noise.walk_std_rad) <= 1e-9
+
+
+@pytest.mark.parametrize(("white_var", "walk_var", "phi"), [(0.5, 0.5, 0.5), (0.9, 0.1, 0.999), (0.01, 0.99, 1e-6)])
+def test_the_likelihoods_stationary_shortcut_matches_the_full_banded_cholesky(
+    white_var: float, walk_var: float, phi: float
+) -> None:
+    """The one-pass likelihood terms, which switch to the stationary row of the factor once it settles, equal the log
+    determinant and chi-square of the full banded Cholesky factor (scipy's) on 2000 differences."""
+    d = np.random.default_rng(3).standard_normal(2001)
+    factor = _filtered_factor(math.sqrt(white_var), math.sqrt(walk_var), phi, 2000)
+    whitened = solve_banded((2, 0), factor, d[1:] - phi * d[:-1])
+    half_log_det, chi2_unit = _whitened_terms(white_var, walk_var, phi, d)
+    assert half_log_det == pytest.approx(float(np.log(factor[0]).sum()), rel=1e-9, abs=1e-9)
+    assert chi2_unit == pytest.approx(float(whitened @ whitened), rel=1e-9)
 
 
 def test_attitude_noise_round_trip_and_bad_values() -> None:

@@ -332,8 +332,10 @@ def _restart_the_closest(
     A missing effect that the candidate then fits to the noise can still leave it in the basin of the baseline's
     unknowns that the effect's misfit made best: on held-out log 9411 (``paper6``, an exact attitude, a 0.37 N m s
     momentum) the named momentum's fit had the fuel's first moment mirrored (tank x +0.50 m against -0.32 m, 24
-    Cramer-Rao std off), its residual 1.03 times the noise but 45 chi-square units above the truth's. So a candidate
-    that is significant is restarted as well (clean logs, where none is, pay nothing)."""
+    Cramer-Rao std off), its residual 1.03 times the noise but 45 chi-square units above the truth's. So the closest
+    candidate is restarted as well when it is significant. A clean log pays only on this test's false alarm (``alpha``
+    over the number of candidates; not the verdict's test, which also counts the variants tried and scales by the best
+    fit's residual variance instead of ``white_std``)."""
     closest = min(range(len(fits)), key=lambda i: fits[i].rss / (fits[i].n_residuals - fits[i].n_params))
     fit = fits[closest]
     white2 = white_std * white_std
