@@ -191,6 +191,9 @@ def test_a_candidate_the_log_hardly_tells_from_the_verdict_is_named_as_its_rival
         odds = math.exp(-0.5 * bias_margin)
         assert found[0][1] == pytest.approx(odds / (1.0 + odds))
     assert rivals("none", fits) == []
+    # a verdict that replaced the lowest BIC by a likelihood-ratio test (here the torque containing the momentum) has
+    # no rival below its own BIC: the test told them apart
+    assert all(f.bic >= torque.bic for f, _ in rivals("external_torque", fits))
 
 
 def test_explained_fraction_is_capped_at_all_of_the_excess() -> None:

@@ -340,7 +340,10 @@ def _restart_the_closest(
     fit = fits[closest]
     white2 = white_std * white_std
     statistic = _chi2(baseline, white2) - _chi2(fit, white2)
-    significant = chi2.sf(max(statistic, 0.0), fit.n_params - baseline.n_params) < alpha / max(len(fits), 1)
+    added = fit.n_params - baseline.n_params
+    if added < 1:
+        raise RuntimeError(f"the catalogue: candidate {fit.effect} adds no unknowns to the model")
+    significant = chi2.sf(max(statistic, 0.0), added) < alpha / max(len(fits), 1)
     if not significant and math.sqrt(fit.rss / (fit.n_residuals - fit.n_params)) <= RESTART_RMS_RATIO * white_std:
         return
     extended = candidate_model(model, fit.spec)

@@ -104,13 +104,15 @@ RIVAL_BIC_MARGIN = 2.0 * math.log(9.0)
 
 
 def rivals(verdict: str, fits: list[ModelFit]) -> list[tuple[ModelFit, float]]:
-    """The named candidates (significant and plausible) within :data:`RIVAL_BIC_MARGIN` of the BIC of the ``verdict``'s
-    fit, neither containing the other, each with its posterior probability among the verdict and its rivals (BIC's
-    approximation, equal priors); none when the verdict names no candidate.
+    """The named candidates (significant and plausible) whose BIC lies less than :data:`RIVAL_BIC_MARGIN` above the
+    ``verdict``'s fit's, neither containing the other, each with its posterior probability among the verdict and its
+    rivals (BIC's approximation, equal priors); none when the verdict names no candidate.
 
     Two effects can be equally good descriptions of a log: on a heavy base whose attitude is not measured, a gyro bias
     and a constant angular momentum both add a nearly constant body rate (held-out seeds 9301 and 9401: BIC within
-    2.3). The verdict names the lower BIC; the rivals say that the log does not decide between them."""
+    2.3). The verdict names the lower BIC; the rivals say that the log does not decide between them. A candidate of
+    lower BIC than the verdict is none: the verdict replaced the lowest BIC by a likelihood-ratio test (it contains it
+    or encompasses it, :func:`_prefer_nesting`, :func:`_prefer_encompassing`), which told them apart."""
     named = [f for f in fits if f.nameable]
     chosen = next((f for f in named if f.effect == verdict), None)
     if chosen is None:
@@ -119,7 +121,7 @@ def rivals(verdict: str, fits: list[ModelFit]) -> list[tuple[ModelFit, float]]:
     def related(a: ModelFit, b: ModelFit) -> bool:
         return str(a.effect) in EFFECT_TERMS[str(b.effect)].nests or str(b.effect) in EFFECT_TERMS[str(a.effect)].nests
 
-    close = [f for f in named if f is not chosen and not related(f, chosen) and f.bic - chosen.bic < RIVAL_BIC_MARGIN]
+    close = [f for f in named if f is not chosen and not related(f, chosen) and 0.0 <= f.bic - chosen.bic < RIVAL_BIC_MARGIN]
     weights = [math.exp(-0.5 * (f.bic - chosen.bic)) for f in close]
     total = 1.0 + sum(weights)
     return [(f, w / total) for f, w in zip(close, weights, strict=True)]
