@@ -49,7 +49,7 @@ For a model (robot, parameterisation, effects already in it) and a log, :func:`d
    otherwise, with the residual structure described (dominant frequencies, correlated inputs, where in time).
 
    A named verdict comes with its *rivals* (:func:`~estimators.diagnostics.verdict.rivals`): other named
-   candidates within ``2 ln 9`` of its BIC, which the log hardly tells from it; the reason names them.
+   candidates less than ``2 ln 9`` above its BIC, which the log hardly tells from it; the reason names them.
 
 ``Diagnosis.to_dict()`` is the ``diagnose --out`` JSON: ``verdict`` (a catalogue name, ``none`` or
 ``unexplained``), ``rivals`` (each with its BIC and posterior probability), ``candidates`` (the named one first, then by BIC; each with ``effect`` and its figures) and
