@@ -93,17 +93,21 @@ def test_the_delay_is_all_pass_so_it_cannot_smooth_the_predictions_noise(lag: fl
     np.testing.assert_allclose(delayed, np.sin(2 * np.pi * 0.01 * (t[200:-200] - lag)), atol=1e-4)
 
 
-def test_slosh_model_explains_most_of_the_simulated_slosh(paper6: Robot) -> None:
+@pytest.mark.parametrize("frequency_hz", [0.3, 0.025])
+def test_slosh_model_explains_most_of_the_simulated_slosh(paper6: Robot, frequency_hz: float) -> None:
     """The slosh term (one-way coupled spring-mass) against the simulator's coupled bodies: the error left is
-    under 5 % of the effect (RMS) and under 5 % of the gyro noise (max), with the excitation that shakes the slosh band."""
-    hidden = HiddenEffects(slosh_mass_kg=30.0, slosh_frequency_hz=0.3, slosh_damping_ratio=0.05)
+    under 0.5 % of the effect (RMS) and of the gyro noise (max), with the excitation that shakes the slosh band, for
+    a 3.3 s and a 40 s period. Without the base frame's Coriolis, Euler and centripetal terms on the displacement
+    (:func:`~estimators.models.mass_effects.frame_terms`) it was 1.7 % and 5.8 % of the effect (3 % of the noise):
+    over 60 s at 20 Hz that misfit moved the fuel 9-22 Cramer-Rao std on held-out logs with 40 s periods."""
+    hidden = HiddenEffects(slosh_mass_kg=30.0, slosh_frequency_hz=frequency_hz, slosh_damping_ratio=0.05)
     log = _noise_free(paper6, hidden, base_frequency_hz=0.05, n_harmonics=10)
     problem = IdentificationModel(paper6, "fuel", effects="slosh").problem(log)
-    error = problem.residuals(np.concatenate((THETA, [30.0, 0.3, 0.05])))
-    effect = problem.residuals(np.concatenate((THETA, [0.0, 0.3, 0.05])))
+    error = problem.residuals(np.concatenate((THETA, [30.0, frequency_hz, 0.05])))
+    effect = problem.residuals(np.concatenate((THETA, [0.0, frequency_hz, 0.05])))
     rms = lambda x: float(np.sqrt(np.mean(x * x)))  # noqa: E731
-    assert rms(error) < 0.05 * rms(effect)
-    assert np.abs(error).max() < 0.05 * 1.44e-4
+    assert rms(error) < 0.005 * rms(effect)
+    assert np.abs(error).max() < 0.005 * 1.44e-4
 
 
 @pytest.mark.parametrize("axis", [(0.0, 0.0, 1.0), (0.3, -0.9, 0.3)])

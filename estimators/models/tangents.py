@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from estimators.models.mass_effects import _cross
+from estimators.models.mass_effects import _cross, frame_terms
 from estimators.models.momentum_model import _add_product, composite_inverse, twist_from_inverse
 from spaceid_gym.arrays import FloatArray
 
@@ -130,23 +130,60 @@ def _slope_and_tangent(
     slopes: FloatArray,
     d_slopes: FloatArray,
     s: int,
+    spin: FloatArray,
+    d_spin: FloatArray,
+    projector: FloatArray,
+    d_projector: FloatArray,
 ) -> None:
-    """``slopes[s]`` = ``[x'; -A (stiff x + damp x') - f]`` at ``point`` = ``[x; x']`` (6,) (the slosh oscillator's
-    derivative, ``A = coupling`` (3, 3), ``f = force[row]``) and ``d_slopes[:, s]`` its derivatives along K directions
-    from those of ``point`` (K, 6), ``coupling`` (K, 3, 3), ``stiff`` and ``damp`` (K,) and ``force`` (K, 3, 3)."""
+    """``slopes[s]`` = ``[x'; -A (stiff x + damp x') - f - Pi g]`` at ``point`` = ``[x; x']`` (6,) (the slosh
+    oscillator's derivative, ``A = coupling`` (3, 3), ``f = force[row]``, ``Pi = projector`` (3, 3), ``g`` the base
+    frame's terms of :func:`~estimators.models.mass_effects.frame_terms` for ``spin[row]``) and ``d_slopes[:, s]`` its
+    derivatives along K directions from those of ``point`` (K, 6), ``coupling`` (K, 3, 3), ``stiff`` and ``damp``
+    (K,), ``force`` (K, 3, 3), ``spin`` (K, 3, 6) and ``projector`` (K, 3, 3)."""
     s0 = stiff * point[0] + damp * point[3]
     s1 = stiff * point[1] + damp * point[4]
     s2 = stiff * point[2] + damp * point[5]
+    g = frame_terms(spin, row, point)
     for c in range(3):
         slopes[s, c] = point[3 + c]
-        slopes[s, 3 + c] = -(coupling[c, 0] * s0 + coupling[c, 1] * s1 + coupling[c, 2] * s2) - force[row, c]
+        slopes[s, 3 + c] = (
+            -(coupling[c, 0] * s0 + coupling[c, 1] * s1 + coupling[c, 2] * s2)
+            - force[row, c]
+            - (projector[c, 0] * g[0] + projector[c, 1] * g[1] + projector[c, 2] * g[2])
+        )
+    wx, wy, wz = spin[row, 0], spin[row, 1], spin[row, 2]
+    w_x = _cross(wx, wy, wz, point[0], point[1], point[2])
+    for k in range(d_point.shape[0]):
+        dp = d_point[k]
+        dw = d_spin[k, row]
+        # d g = 2 (dw x x' + w x dx') + d(dw/dt) x x + dw/dt x dx + dw x (w x x) + w x (dw x x + w x dx)
+        e1 = _cross(dw[0], dw[1], dw[2], point[3], point[4], point[5])
+        e2 = _cross(wx, wy, wz, dp[3], dp[4], dp[5])
+        e3 = _cross(dw[3], dw[4], dw[5], point[0], point[1], point[2])
+        e4 = _cross(spin[row, 3], spin[row, 4], spin[row, 5], dp[0], dp[1], dp[2])
+        e5 = _cross(dw[0], dw[1], dw[2], w_x[0], w_x[1], w_x[2])
+        inner = _cross(dw[0], dw[1], dw[2], point[0], point[1], point[2])
+        inner2 = _cross(wx, wy, wz, dp[0], dp[1], dp[2])
+        e6 = _cross(wx, wy, wz, inner[0] + inner2[0], inner[1] + inner2[1], inner[2] + inner2[2])
+        dg0 = 2.0 * (e1[0] + e2[0]) + e3[0] + e4[0] + e5[0] + e6[0]
+        dg1 = 2.0 * (e1[1] + e2[1]) + e3[1] + e4[1] + e5[1] + e6[1]
+        dg2 = 2.0 * (e1[2] + e2[2]) + e3[2] + e4[2] + e5[2] + e6[2]
+        for c in range(3):
+            d_slopes[k, s, 3 + c] = -(
+                d_projector[k, c, 0] * g[0]
+                + d_projector[k, c, 1] * g[1]
+                + d_projector[k, c, 2] * g[2]
+                + projector[c, 0] * dg0
+                + projector[c, 1] * dg1
+                + projector[c, 2] * dg2
+            )
     for k in range(d_point.shape[0]):
         ds0 = d_stiff[k] * point[0] + stiff * d_point[k, 0] + d_damp[k] * point[3] + damp * d_point[k, 3]
         ds1 = d_stiff[k] * point[1] + stiff * d_point[k, 1] + d_damp[k] * point[4] + damp * d_point[k, 4]
         ds2 = d_stiff[k] * point[2] + stiff * d_point[k, 2] + d_damp[k] * point[5] + damp * d_point[k, 5]
         for c in range(3):
             d_slopes[k, s, c] = d_point[k, 3 + c]
-            d_slopes[k, s, 3 + c] = (
+            d_slopes[k, s, 3 + c] += (
                 -(d_coupling[k, c, 0] * s0 + d_coupling[k, c, 1] * s1 + d_coupling[k, c, 2] * s2)
                 - (coupling[c, 0] * ds0 + coupling[c, 1] * ds1 + coupling[c, 2] * ds2)
                 - d_force[k, row, c]
@@ -183,6 +220,8 @@ def slosh_tangents(
     d_moved = np.zeros((n_k, n_t, 10))
     accel = np.empty((n_t, 3))
     d_accel = np.empty((n_k, n_t, 3))
+    rates = np.empty((n_t, 6))  # [omega; domega/dt] per sample and their derivatives
+    d_rates = np.empty((n_k, n_t, 6))
     free = np.empty(3)
     d_free = np.empty(3)
     rx, ry, rz = tank[0], tank[1], tank[2]
@@ -201,12 +240,15 @@ def slosh_tangents(
             free[c] = (twist[hi, c] - twist[lo, c]) * inv + a1[c] + a2[c] + a3[c]
         for c in range(3):
             accel[k, c] = projector[c, 0] * free[0] + projector[c, 1] * free[1] + projector[c, 2] * free[2]
+        rates[k, 0], rates[k, 1], rates[k, 2], rates[k, 3], rates[k, 4], rates[k, 5] = wx, wy, wz, dwx, dwy, dwz
         for q in range(n_k):
             tv = d_twist[q, k]
             drx, dry, drz = d_tank[q, 0], d_tank[q, 1], d_tank[q, 2]
             ddwx = (d_twist[q, hi, 3] - d_twist[q, lo, 3]) * inv
             ddwy = (d_twist[q, hi, 4] - d_twist[q, lo, 4]) * inv
             ddwz = (d_twist[q, hi, 5] - d_twist[q, lo, 5]) * inv
+            d_rates[q, k, 0], d_rates[q, k, 1], d_rates[q, k, 2] = tv[3], tv[4], tv[5]
+            d_rates[q, k, 3], d_rates[q, k, 4], d_rates[q, k, 5] = ddwx, ddwy, ddwz
             b1 = _cross(tv[3], tv[4], tv[5], vx, vy, vz)
             b2 = _cross(wx, wy, wz, tv[0], tv[1], tv[2])
             b3 = _cross(ddwx, ddwy, ddwz, rx, ry, rz)
@@ -231,6 +273,7 @@ def slosh_tangents(
     d_damp = 2.0 * (d_zeta * omega_n + zeta * d_omega_n)
     state, stage, slopes, force = np.zeros(6), np.empty(6), np.empty((4, 6)), np.empty((3, 3))
     d_state, d_stage, d_slopes, d_force = np.zeros((n_k, 6)), np.empty((n_k, 6)), np.empty((n_k, 4, 6)), np.empty((n_k, 3, 3))
+    spin, d_spin = np.empty((3, 6)), np.empty((n_k, 3, 6))
     states = np.zeros((n_t, 6))
     d_states = np.zeros((n_k, n_t, 6))
     for k in range(1, n_t):
@@ -241,8 +284,31 @@ def slosh_tangents(
             for q in range(n_k):
                 d_force[q, 0, c], d_force[q, 2, c] = d_accel[q, k - 1, c], d_accel[q, k, c]
                 d_force[q, 1, c] = 0.5 * (d_force[q, 0, c] + d_force[q, 2, c])
+        for c in range(6):
+            spin[0, c], spin[2, c] = rates[k - 1, c], rates[k, c]
+            spin[1, c] = 0.5 * (spin[0, c] + spin[2, c])
+            for q in range(n_k):
+                d_spin[q, 0, c], d_spin[q, 2, c] = d_rates[q, k - 1, c], d_rates[q, k, c]
+                d_spin[q, 1, c] = 0.5 * (d_spin[q, 0, c] + d_spin[q, 2, c])
         _slope_and_tangent(
-            coupling, d_coupling, stiff, damp, d_stiff, d_damp, state, d_state, force, d_force, 0, slopes, d_slopes, 0
+            coupling,
+            d_coupling,
+            stiff,
+            damp,
+            d_stiff,
+            d_damp,
+            state,
+            d_state,
+            force,
+            d_force,
+            0,
+            slopes,
+            d_slopes,
+            0,
+            spin,
+            d_spin,
+            projector,
+            d_projector,
         )
         for s in range(1, 4):
             fraction = 1.0 if s == 3 else 0.5
@@ -252,7 +318,24 @@ def slosh_tangents(
                     d_stage[q, i] = d_state[q, i] + fraction * h * d_slopes[q, s - 1, i]
             row = 1 if s < 3 else 2
             _slope_and_tangent(
-                coupling, d_coupling, stiff, damp, d_stiff, d_damp, stage, d_stage, force, d_force, row, slopes, d_slopes, s
+                coupling,
+                d_coupling,
+                stiff,
+                damp,
+                d_stiff,
+                d_damp,
+                stage,
+                d_stage,
+                force,
+                d_force,
+                row,
+                slopes,
+                d_slopes,
+                s,
+                spin,
+                d_spin,
+                projector,
+                d_projector,
             )
         for i in range(6):
             state[i] = state[i] + (h / 6.0) * (slopes[0, i] + 2.0 * slopes[1, i] + 2.0 * slopes[2, i] + slopes[3, i])
