@@ -290,53 +290,21 @@ def slosh_tangents(
             for q in range(n_k):
                 d_spin[q, 0, c], d_spin[q, 2, c] = d_rates[q, k - 1, c], d_rates[q, k, c]
                 d_spin[q, 1, c] = 0.5 * (d_spin[q, 0, c] + d_spin[q, 2, c])
-        _slope_and_tangent(
-            coupling,
-            d_coupling,
-            stiff,
-            damp,
-            d_stiff,
-            d_damp,
-            state,
-            d_state,
-            force,
-            d_force,
-            0,
-            slopes,
-            d_slopes,
-            0,
-            spin,
-            d_spin,
-            projector,
-            d_projector,
-        )
-        for s in range(1, 4):
-            fraction = 1.0 if s == 3 else 0.5
-            for i in range(6):
-                stage[i] = state[i] + fraction * h * slopes[s - 1, i]
-                for q in range(n_k):
-                    d_stage[q, i] = d_state[q, i] + fraction * h * d_slopes[q, s - 1, i]
-            row = 1 if s < 3 else 2
+        for s in range(4):  # RK4 stages: the step's start, its middle twice, its end
+            if s > 0:
+                fraction = 1.0 if s == 3 else 0.5
+                for i in range(6):
+                    stage[i] = state[i] + fraction * h * slopes[s - 1, i]
+                    for q in range(n_k):
+                        d_stage[q, i] = d_state[q, i] + fraction * h * d_slopes[q, s - 1, i]
+            else:
+                stage[:] = state
+                d_stage[:] = d_state
+            row = 0 if s == 0 else (1 if s < 3 else 2)
             _slope_and_tangent(
-                coupling,
-                d_coupling,
-                stiff,
-                damp,
-                d_stiff,
-                d_damp,
-                stage,
-                d_stage,
-                force,
-                d_force,
-                row,
-                slopes,
-                d_slopes,
-                s,
-                spin,
-                d_spin,
-                projector,
-                d_projector,
-            )
+                coupling, d_coupling, stiff, damp, d_stiff, d_damp, stage, d_stage, force, d_force, row, slopes, d_slopes, s,
+                spin, d_spin, projector, d_projector,
+            )  # fmt: skip
         for i in range(6):
             state[i] = state[i] + (h / 6.0) * (slopes[0, i] + 2.0 * slopes[1, i] + 2.0 * slopes[2, i] + slopes[3, i])
             states[k, i] = state[i]
