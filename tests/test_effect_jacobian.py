@@ -17,7 +17,7 @@ CASES = {
     "delay,gyro_scale": [0.05, 0.02, -0.01, 0.015, 0.01, -0.02, 0.005, -0.012, 0.018, 0.01],
     "payload": [20.0, 2.0, -1.0, 0.5, 0.4, 0.02, 0.35, -0.01, 0.03, 0.3],
     "slosh": [15.0, 0.25, 0.08],
-    "slosh[model=pendulum]": [15.0, 0.25, 0.08, 0.4, 0.7],
+    "slosh[model=pendulum]": [15.0, 0.25, 0.08, 0.4, 0.7, 4.0],
     "payload,slosh,external_torque,delay,gyro_bias": [
         *[20.0, 2.0, -1.0, 0.5, 0.4, 0.02, 0.35, -0.01, 0.03, 0.3],
         *[15.0, 0.4, 0.1],
@@ -28,8 +28,9 @@ CASES = {
 }
 
 #: the central differences' steps (fractions of each search width) the analytic Jacobian is compared with: rounding
-#: dominates the smaller, truncation the larger (the slosh frequency's column); each column must agree with one
-STEPS = (1e-6, 1e-5)
+#: dominates the smaller, truncation the larger (the slosh frequency's column); each column must agree with one (the
+#: pendulum rod's curvature, whose column is 1e-4 of the others on this short log, only with the largest)
+STEPS = (1e-6, 1e-5, 1e-3)
 
 #: the largest difference allowed, relative to the column's largest entry (central differences reach 1e-8 to 5e-8
 #: with the better of the two steps; the analytic columns agree with them that far)

@@ -9,7 +9,7 @@ central differences evaluated the whole prediction at ``2k`` points:
 * the extra momentum of the momentum terms (``initial_momentum``, ``external_torque``): linear in their unknowns,
   so each term evaluated at unit vectors is its derivative;
 * the slosh oscillator: its per-fit inputs (the rest's parameters, the tank, the sloshing mass, the natural
-  frequency, damping, coupling and projector: a few numbers per parameter vector, no sample dimension) by central
+  frequency, damping, rod curvature, coupling and rod axis: a few numbers per parameter vector, no sample dimension) by central
   differences, their propagation along the log forward-mode;
 * the measurement terms (``delay``, ``gyro_scale``, ``gyro_bias``): linear in the rate, so the rate's derivatives pass
   through them (a bias adds nothing to a derivative); their own unknowns' columns by central differences of that
@@ -159,17 +159,13 @@ def _slosh_twist(
     n_k, step = len(columns), all_steps[columns]
 
     def per_fit(rows: FloatArray) -> FloatArray:
-        """The oscillator's inputs for parameter vectors (P, k): (P, 34)."""
+        """The rest's parameters and the oscillator's inputs for parameter vectors (P, k): (P, 10 + N_INPUTS)."""
         base10, payload10 = params.composite(rows)
         theta_base = params.base_part(rows)
         moving = slosh.moving_part(params.term_parts(rows)[slosh], theta_base)
         tank = np.ascontiguousarray(slosh.tank_of(theta_base), dtype=float)
         rest10 = base10 - _point_mass10(moving[:, 0], tank)
-        omega_n, coupling, projector = slosh.oscillator(moving, tank, model.mean_composite10(base10, payload10))
-        n_p = len(rows)
-        return np.hstack(
-            (rest10, tank, moving[:, :1], omega_n[:, None], moving[:, 2:3], coupling.reshape(n_p, 9), projector.reshape(n_p, 9))
-        )
+        return np.hstack((rest10, slosh.inputs(moving, tank, model.mean_composite10(base10, payload10))))
 
     points = np.repeat(theta[None], 2 * n_k, axis=0)
     index = np.arange(n_k)
@@ -177,25 +173,11 @@ def _slosh_twist(
     points[2 * index + 1, columns] -= step
     value = per_fit(theta[None])[0]
     shifted = per_fit(points)
-    d_value = (shifted[0::2] - shifted[1::2]) / (2.0 * step[:, None])  # (k, 34)
+    d_value = (shifted[0::2] - shifted[1::2]) / (2.0 * step[:, None])  # (k, 10 + N_INPUTS)
     rest_twist, d_rest_twist = _twist(model, (value[:10], d_value[:, :10]), payload, extra, d_extra)
     c = np.ascontiguousarray
     relative, d_relative, moved, d_moved = slosh_tangents(
-        rest_twist,
-        d_rest_twist,
-        prediction.context.t_s,
-        c(value[10:13]),
-        c(d_value[:, 10:13]),
-        float(value[13]),
-        c(d_value[:, 13]),
-        float(value[14]),
-        c(d_value[:, 14]),
-        float(value[15]),
-        c(d_value[:, 15]),
-        c(value[16:25].reshape(3, 3)),
-        c(d_value[:, 16:25].reshape(n_k, 3, 3)),
-        c(value[25:34].reshape(3, 3)),
-        c(d_value[:, 25:34].reshape(n_k, 3, 3)),
+        rest_twist, d_rest_twist, prediction.context.t_s, c(value[10:]), c(d_value[:, 10:]), slosh.has_rod
     )
     carried = -relative if extra is None else extra - relative
     d_carried = -d_relative if d_extra is None else d_extra - d_relative

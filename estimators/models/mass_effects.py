@@ -9,15 +9,18 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
-from numba import njit
 
 from estimators.models.effect_base import EffectContext, EffectTerm
+from estimators.models.slosh_dynamics import slosh_momentum
 from spaceid_gym.arrays import FloatArray
 from spaceid_gym.effects.draws import remaining_liquid_kg
 from spaceid_gym.effects.settings import SLOSH_MODELS
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.physics.inertia import PARAMS10_NAMES, RigidBodyInertia, skew, spatial_inertia_matrix
 from spaceid_gym.robots import Robot
+
+#: the pendulum's search range of the rod's curvature, 1/m: rods from 5 cm, the hinge on either side of the mass
+ROD_CURVATURE_MAX = 20.0
 
 #: the payload's search range: mass up to this fraction of the robot's (base full of fuel and arm)
 PAYLOAD_MAX_FRACTION_OF_ROBOT = 1.0
@@ -131,40 +134,40 @@ def _pseudo_inertia(params10: FloatArray) -> FloatArray:
 
 
 class Slosh(EffectTerm):
-    """``[m_s kg, f Hz, zeta]``: part of the liquid moves as a point mass on an isotropic spring-damper at the tank.
+    """``[m_s kg, f Hz, zeta]``: part of the liquid moves as a point mass on a spring-damper or a pendulum at the tank.
 
     Equivalent-mechanical model of the first slosh mode (Abramson, NASA SP-106; Dodge 2000). The mass sits
     at the tank ``r`` (base frame; from the fuel parameters, else the full-tank CoM) when at rest and is
-    part of the rigid base there; its displacement ``x`` (base axes) obeys
-    ``x'' = -A (k x + c x') - a_tank(t) - g`` with ``k = m_s w^2``, ``c = 2 zeta m_s w``, ``w = 2 pi f``, driven by the
-    tank's inertial acceleration ``a_tank = dv/dt + omega x v + domega/dt x r + omega x (omega x r)`` (base axes)
-    of the prediction without the slosh mass (the rest of the robot), with ``g = 2 omega x x' + domega/dt x x + omega x
-    (omega x x)`` the rotating base frame's Coriolis, Euler and centripetal terms on the displacement
-    (:func:`frame_terms`; without them a 40 s slosh left 5 % of its effect unexplained on a noise-free log); ``A = E / m_s + Lambda^-1`` because the spring force also pushes the rest of the
-    robot (``Lambda^-1``: its inverse operational mass at the tank, from the log's mean composite), which raises
-    the relative frequency above ``f`` (the mass's frequency against a fixed wall).
-    Its momentum relative to the base, ``[m_s x'; m_s (r + x) x x']``, is then carried by the rest, the
-    displaced mass changes the composite's first moment and inertia (a point mass at ``r + x`` instead of
-    ``r``), and the prediction is made again with both. Neglected: the coupling's change with the arm's
-    configuration, and the slosh's feedback on its own forcing beyond ``Lambda^-1``.
-    Integrated with RK4 at the log's sample period, starting at rest.
+    part of the rigid base there; its displacement ``x`` (base axes) follows the equations of motion of
+    :mod:`estimators.models.slosh_dynamics`: a spring ``k = m_s w^2``, damper ``c = 2 zeta m_s w``, ``w = 2 pi f``,
+    driven by the tank's inertial acceleration from the prediction without the slosh mass (the rest of the robot) and
+    by the rotating base frame's Coriolis, Euler and centripetal terms on ``x`` (without them a 40 s slosh left 5 % of
+    its effect unexplained on a noise-free log). The force on the mass also pushes the rest of the robot
+    (``Lambda^-1``: its inverse operational mass at the tank, from the log's mean composite), which raises the relative
+    frequency above ``f`` (the mass's frequency against a fixed wall). Its momentum relative to the base, ``[m_s x';
+    m_s (r + x) x x']``, is then carried by the rest, the displaced mass changes the composite's first moment and
+    inertia (a point mass at ``r + x`` instead of ``r``), and the prediction is made again with both. Neglected: the
+    coupling's change with the arm's configuration, and the slosh's feedback on its own forcing beyond ``Lambda^-1``.
 
     Two equivalent mechanical models (Abramson, NASA SP-106, ch. 6), ``model=``: ``"spring"`` (the default; the mass
-    moves in every direction) and ``"pendulum"`` (``slosh[model=pendulum]``: a mass on a rod whose direction, two more
-    unknowns ``slosh_axis_azimuth_rad`` and ``slosh_axis_elevation_rad`` (base frame), is fitted; in the small-angle
-    limit the rod carries the mass with the base along it and the mass moves only normal to it, so the oscillator and
-    its forcing are projected on that plane, :meth:`projector`). Their lateral dynamics are the same; they differ in
-    what the motion along the rod does. :func:`~estimators.diagnostics.diagnose.diagnose` fits both and names
-    ``slosh`` with the better.
+    moves in every direction) and ``"pendulum"`` (``slosh[model=pendulum]``: a mass on a rod, three more unknowns: its
+    direction at rest ``slosh_axis_azimuth_rad`` and ``slosh_axis_elevation_rad`` (base frame) and its signed curvature
+    ``slosh_rod_curvature_per_m`` = 1 / rod length, the hinge at ``r - a / kappa``: the rod keeps the mass on a sphere,
+    and ``kappa = 0`` is the small-angle limit, the mass moving in the plane normal to the rod). Their small lateral
+    motions are the same; they differ in what the rod does: it carries the mass with the base along it, and beyond
+    small angles it pulls the mass back along itself (a 0.1 m rod swinging 25 degrees: a quarter of the effect on a
+    noise-free log). :func:`~estimators.diagnostics.diagnose.diagnose` fits both and names ``slosh`` with the better.
 
     Ranges: ``m_s`` in ``[0, usable fuel]``, ``f`` in ``[0.02, 2]`` Hz (periods 0.5-50 s: the first lateral mode of
     tanks from 0.1 m to several metres, whichever equivalent model, pendulum or spring-mass, describes it),
-    ``zeta`` in ``[0.001, 1]``; nominal ``m_s = 0`` (off). The cost is multimodal in the frequency: :meth:`grid`
-    offers a log-spaced scan of the whole band to choose the local fits' starts from. Only liquid still in the tank can slosh: ``liquid_of`` gives it for the base parameters
-    (with the fuel parameters, the usable fuel minus the fuel consumed; else the usable fuel). A larger ``m_s``
-    moves only the liquid there is (:meth:`moving_part`; the prediction is flat in ``m_s`` beyond it) and such a
-    fit is implausible: subtracting more than the liquid from the base leaves a "rest" that is not a body, whose
-    coupling makes the oscillator unstable (the prediction overflowed before this limit).
+    ``zeta`` in ``[0.001, 1]``, ``kappa`` in ``[-ROD_CURVATURE_MAX, ROD_CURVATURE_MAX]`` (rods from 5 cm; the sign
+    says on which side of the mass the hinge is); nominal ``m_s = 0`` (off). The cost is multimodal in the
+    frequency: :meth:`grid` offers a log-spaced scan of the whole band to choose the local fits' starts from. Only
+    liquid still in the tank can slosh: ``liquid_of`` gives it for the base parameters (with the fuel parameters, the
+    usable fuel minus the fuel consumed; else the usable fuel). A larger ``m_s`` moves only the liquid there is
+    (:meth:`moving_part`; the prediction is flat in ``m_s`` beyond it) and such a fit is implausible: subtracting more
+    than the liquid from the base leaves a "rest" that is not a body, whose coupling makes the oscillator unstable
+    (the prediction overflowed before this limit).
     """
 
     name = "slosh"
@@ -206,10 +209,10 @@ class Slosh(EffectTerm):
         upper, scale = [liquid_max_kg, 2.0, 1.0], [0.1 * liquid_max_kg, 0.3, 0.1]
         if model == "pendulum":
             # the rod's direction: periodic angles, searched over two turns so that no fit stops on a wall
-            self.names = (*Slosh.names, "slosh_axis_azimuth_rad", "slosh_axis_elevation_rad")
-            self.truth_fields = (*Slosh.truth_fields, ("slosh_axis", 3))
-            nominal, lower = [*nominal, 0.0, 0.5 * math.pi], [*lower, -2.0 * math.pi, -math.pi]
-            upper, scale = [*upper, 2.0 * math.pi, math.pi], [*scale, 0.5, 0.5]
+            self.names = (*Slosh.names, "slosh_axis_azimuth_rad", "slosh_axis_elevation_rad", "slosh_rod_curvature_per_m")
+            self.truth_fields = (*Slosh.truth_fields, ("slosh_axis", 3), ("slosh_length_m", 1))
+            nominal, lower = [*nominal, 0.0, 0.5 * math.pi, 0.0], [*lower, -2.0 * math.pi, -math.pi, -ROD_CURVATURE_MAX]
+            upper, scale = [*upper, 2.0 * math.pi, math.pi, ROD_CURVATURE_MAX], [*scale, 0.5, 0.5, 1.0]
         super().__init__(np.array(nominal), np.array(lower), np.array(upper), np.array(scale))
         full_com = np.asarray(robot.base_full.com_m, dtype=float)
         self.tank_of = tank_of if tank_of is not None else (lambda theta_base: np.broadcast_to(full_com, (len(theta_base), 3)))
@@ -220,8 +223,9 @@ class Slosh(EffectTerm):
         return self.name if self.model == "spring" else f"{self.name}[model={self.model}]"
 
     def from_truth(self, hidden: Mapping[str, Any]) -> FloatArray:
-        """As :meth:`EffectTerm.from_truth`; the pendulum's axis (a unit vector in the truth) as its two angles, and a
-        spring truth read by the pendulum term with the rod along the nominal axis (and vice versa, the axis dropped)."""
+        """As :meth:`EffectTerm.from_truth`; the pendulum's axis (a unit vector in the truth) as its two angles and its
+        rod length as the curvature ``1 / L``, and a spring truth read by the pendulum term with a straight rod
+        (``kappa = 0``) along the nominal axis (and vice versa, the rod dropped)."""
         theta = self.nominal.copy()
         for i, field in enumerate(Slosh.names):
             if field in hidden:
@@ -232,16 +236,19 @@ class Slosh(EffectTerm):
                 raise SpaceIdInputError(f"hidden_effects: slosh_axis expected a non-zero 3-vector, got {hidden['slosh_axis']!r}")
             axis = axis / np.linalg.norm(axis)
             theta[3:5] = math.atan2(axis[1], axis[0]), math.asin(float(np.clip(axis[2], -1.0, 1.0)))
+        if self.model == "pendulum" and hidden.get("slosh_length_m") is not None:
+            length_m = float(hidden["slosh_length_m"])
+            if not length_m > 0.0:
+                raise SpaceIdInputError(f"hidden_effects: slosh_length_m expected > 0 m, got {hidden['slosh_length_m']!r}")
+            theta[5] = 1.0 / length_m
         return theta
 
-    def projector(self, theta: FloatArray) -> FloatArray:
-        """(P, 3, 3): where the slosh mass can move, base axes: everywhere for the spring, the plane normal to the
-        rod ``a = [cos el cos az, cos el sin az, sin el]`` for the pendulum (``E - a a^T``: the small-angle limit, in which
-        the rod moves the mass with the base along ``a``)."""
+    def rod(self, theta: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """The pendulum's rod for ``theta`` (P, k_e): its unit axis at rest ``a = [cos el cos az, cos el sin az, sin
+        el]`` (P, 3), base axes, and curvature (P,) 1/m; for the spring (no rod) ``+z`` and 0, unused."""
         if self.model == "spring":
-            return np.broadcast_to(np.eye(3), (len(theta), 3, 3)).copy()
-        axis = rod_axis(theta[:, 3], theta[:, 4])
-        return np.eye(3) - axis[:, :, None] * axis[:, None, :]
+            return np.tile([0.0, 0.0, 1.0], (len(theta), 1)), np.zeros(len(theta))
+        return rod_axis(theta[:, 3], theta[:, 4]), np.array(theta[:, 5], dtype=float)
 
     def moving_part(self, theta: FloatArray, theta_base: FloatArray) -> FloatArray:
         """``theta`` (P, 3) with the slosh mass limited to the liquid left in the tank for ``theta_base`` (P, k_base)."""
@@ -256,13 +263,13 @@ class Slosh(EffectTerm):
         mass = 0.1 * self.upper[0]
         if theta_base is not None:
             mass = min(mass, 0.5 * float(self.liquid_of(np.atleast_2d(theta_base))[0]))
-        return [np.array([mass, f, 0.05, *self.GRID_AXES[0]][: self.n_params]) for f in self.START_FREQUENCIES_HZ]
+        return [np.array([mass, f, 0.05, *self.GRID_AXES[0], 0.0][: self.n_params]) for f in self.START_FREQUENCIES_HZ]
 
     def grid(self, theta_base: FloatArray | None = None) -> list[FloatArray]:
         """:data:`GRID_FREQUENCIES_HZ` x :data:`GRID_MASS_FRACTIONS` of the liquid left for ``theta_base`` (or of the
         usable fuel), damping 0.05: candidates to score in one batched evaluation before the local fits."""
         liquid = self.upper[0] if theta_base is None else float(self.liquid_of(np.atleast_2d(theta_base))[0])
-        axes = self.GRID_AXES if self.model == "pendulum" else ((),)
+        axes = tuple((*axis, 0.0) for axis in self.GRID_AXES) if self.model == "pendulum" else ((),)
         return [
             np.array([fraction * liquid, f, 0.05, *axis])
             for f in self.GRID_FREQUENCIES_HZ
@@ -271,12 +278,12 @@ class Slosh(EffectTerm):
         ]
 
     def grid_from_variant(self, fitted: FloatArray) -> list[FloatArray]:
-        """The pendulum's candidates (5,) with the mass, frequency and damping of ``fitted`` (the first three values: a
-        fit of the other slosh model, whose lateral dynamics are the same) and the rod along each of
+        """The pendulum's candidates (6,) with the mass, frequency and damping of ``fitted`` (the first three values: a
+        fit of the other slosh model, whose small lateral motions are the same) and a straight rod along each of
         :data:`FINE_AXES`; none for the spring."""
         if self.model != "pendulum":
             return []
-        return [np.array([*np.asarray(fitted, dtype=float)[:3], *axis]) for axis in self.FINE_AXES]
+        return [np.array([*np.asarray(fitted, dtype=float)[:3], *axis, 0.0]) for axis in self.FINE_AXES]
 
     def momentum(
         self, twist: FloatArray, theta: FloatArray, tank_m: FloatArray, composite10: FloatArray, context: EffectContext
@@ -287,25 +294,23 @@ class Slosh(EffectTerm):
         ``composite10`` (P, 10) is the robot's mean composite (base and arm, slosh mass included) over the log,
         whose inverse inertia at the tank couples the slosh back to the base.
         """
-        omega_n, coupling, projector = self.oscillator(theta, tank_m, composite10)
-        return _slosh_momentum(
-            np.ascontiguousarray(twist),
-            context.t_s,
-            np.ascontiguousarray(tank_m),
-            theta[:, 0],
-            omega_n,
-            theta[:, 2],
-            coupling,
-            projector,
-        )
+        return slosh_momentum(np.ascontiguousarray(twist), context.t_s, self.inputs(theta, tank_m, composite10), self.has_rod)
 
-    def oscillator(self, theta: FloatArray, tank_m: FloatArray, composite10: FloatArray) -> tuple[FloatArray, ...]:
-        """The oscillator of :meth:`momentum` for ``theta`` (P, k_e): natural frequency (P,) rad/s, the projected
-        coupling ``Pi (E + m_s Lambda^-1)`` (P, 3, 3) and the projector ``Pi`` (P, 3, 3)."""
+    @property
+    def has_rod(self) -> bool:
+        """Whether the mass is on a rod (the pendulum) or a spring."""
+        return self.model == "pendulum"
+
+    def inputs(self, theta: FloatArray, tank_m: FloatArray, composite10: FloatArray) -> FloatArray:
+        """The inputs (P, :data:`~estimators.models.slosh_dynamics.N_INPUTS`) of
+        :func:`~estimators.models.slosh_dynamics.slosh_momentum` for ``theta`` (P, k_e) and the tank points (P, 3):
+        the tank, ``[m_s, w, zeta, kappa]`` (natural frequency rad/s, the rod's curvature 1/m, 0 without a rod), the
+        coupling ``E + m_s Lambda^-1`` (Lambda^-1 of the rest of ``composite10`` at the tank) and the rod's axis."""
         rest = composite10 - _point_mass10(theta[:, 0], tank_m)
         coupling = np.eye(3) + theta[:, 0, None, None] * _inverse_mass_at(rest, tank_m)  # m_s A, finite at m_s = 0
-        projector = self.projector(theta)
-        return 2.0 * np.pi * theta[:, 1], np.ascontiguousarray(projector @ coupling), np.ascontiguousarray(projector)
+        axis, kappa = self.rod(theta)
+        oscillator = np.stack((theta[:, 0], 2.0 * np.pi * theta[:, 1], theta[:, 2], kappa), axis=1)
+        return np.ascontiguousarray(np.hstack((tank_m, oscillator, coupling.reshape(len(theta), 9), axis)))
 
     def physical(self, theta: FloatArray) -> dict[str, Any]:
         out: dict[str, Any] = {
@@ -315,6 +320,7 @@ class Slosh(EffectTerm):
         }
         if self.model == "pendulum":  # numbers only (the estimate's std differentiates them); the model is in the spec
             out["slosh_axis"] = rod_axis(theta[3:4], theta[4:5])[0].tolist()
+            out["slosh_rod_curvature_per_m"] = float(theta[5])
         return out
 
     def implausible(
@@ -351,143 +357,3 @@ def _inverse_mass_at(params10: FloatArray, point_m: FloatArray) -> FloatArray:
     g[:, :, :3] = np.eye(3)
     g[:, :, 3:] = -skew(point_m)
     return g @ inverse @ np.swapaxes(g, 1, 2)
-
-
-@njit(cache=True, inline="always")
-def _cross(ax: float, ay: float, az: float, bx: float, by: float, bz: float) -> tuple[float, float, float]:
-    return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
-
-
-@njit(cache=True, inline="always")
-def frame_terms(spin: FloatArray, row: int, point: FloatArray) -> tuple[float, float, float]:
-    """The acceleration terms of a displacement ``x`` moving at ``x'`` (``point`` = ``[x; x']``, base axes) in the
-    rotating base frame, ``2 omega x x' + domega/dt x x + omega x (omega x x)``, for ``spin[row]`` = ``[omega;
-    domega/dt]`` (base axes): Coriolis, Euler and centripetal."""
-    wx, wy, wz = spin[row, 0], spin[row, 1], spin[row, 2]
-    c1 = _cross(wx, wy, wz, point[3], point[4], point[5])
-    c2 = _cross(spin[row, 3], spin[row, 4], spin[row, 5], point[0], point[1], point[2])
-    wx_ = _cross(wx, wy, wz, point[0], point[1], point[2])
-    c3 = _cross(wx, wy, wz, wx_[0], wx_[1], wx_[2])
-    return 2.0 * c1[0] + c2[0] + c3[0], 2.0 * c1[1] + c2[1] + c3[1], 2.0 * c1[2] + c2[2] + c3[2]
-
-
-@njit(cache=True, inline="always")
-def _oscillator_slope(
-    coupling: FloatArray,
-    p: int,
-    stiff: float,
-    damp: float,
-    point: FloatArray,
-    force: FloatArray,
-    row: int,
-    slopes: FloatArray,
-    s: int,
-    spin: FloatArray,
-    projector: FloatArray,
-) -> None:
-    """``slopes[s]`` = the derivative ``[x'; -A (stiff x + damp x') - f - Pi g]`` of the slosh oscillator at ``point`` =
-    ``[x; x']`` (6,), with ``A = coupling[p]``, the forcing ``f = force[row]``, the base frame's terms ``g`` of
-    :func:`frame_terms` for ``spin[row]`` and ``Pi = projector[p]`` (see :func:`_slosh_momentum`)."""
-    s0 = stiff * point[0] + damp * point[3]
-    s1 = stiff * point[1] + damp * point[4]
-    s2 = stiff * point[2] + damp * point[5]
-    g = frame_terms(spin, row, point)
-    for c in range(3):
-        slopes[s, c] = point[3 + c]
-        slopes[s, 3 + c] = (
-            -(coupling[p, c, 0] * s0 + coupling[p, c, 1] * s1 + coupling[p, c, 2] * s2)
-            - force[row, c]
-            - (projector[p, c, 0] * g[0] + projector[p, c, 1] * g[1] + projector[p, c, 2] * g[2])
-        )
-
-
-@njit(cache=True)
-def _slosh_momentum(
-    twist: FloatArray,
-    t_s: FloatArray,
-    tank: FloatArray,
-    mass: FloatArray,
-    omega_n: FloatArray,
-    zeta: FloatArray,
-    coupling: FloatArray,
-    projector: FloatArray,
-) -> tuple[FloatArray, FloatArray]:
-    """See :meth:`Slosh.momentum`; RK4 with the forcing linear between samples (each axis is the same scalar
-    oscillator). ``coupling`` (P, 3, 3) is ``Pi (E + m_s Lambda^-1)`` and the forcing is ``Pi a_tank``, with ``Pi =
-    projector`` (P, 3, 3) the directions the mass can move in (:meth:`Slosh.projector`): starting at rest, the
-    displacement stays in them."""
-    n_p, n_t = twist.shape[0], twist.shape[1]
-    out = np.zeros((n_p, n_t, 6))
-    moved = np.zeros((n_p, n_t, 10))
-    accel = np.empty((n_t, 3))
-    rates = np.empty((n_t, 6))  # [omega; domega/dt] of the base per sample, base axes
-    spin = np.empty((3, 6))  # the same at a step's start, middle and end
-    # RK4 scratch: the state [x; x'], the point of a stage, the four slopes, the forcing at a step's start/middle/end
-    state, stage, slopes, force = np.empty(6), np.empty(6), np.empty((4, 6)), np.empty((3, 3))
-    free = np.empty(3)  # the tank's acceleration before the projection
-    for p in range(n_p):
-        rx, ry, rz = tank[p, 0], tank[p, 1], tank[p, 2]
-        # tank acceleration (base axes) from the twist, derivatives by central differences
-        for k in range(n_t):
-            lo, hi = max(k - 1, 0), min(k + 1, n_t - 1)
-            inv = 1.0 / (t_s[hi] - t_s[lo])
-            vx, vy, vz, wx, wy, wz = (
-                twist[p, k, 0],
-                twist[p, k, 1],
-                twist[p, k, 2],
-                twist[p, k, 3],
-                twist[p, k, 4],
-                twist[p, k, 5],
-            )
-            dwx = (twist[p, hi, 3] - twist[p, lo, 3]) * inv
-            dwy = (twist[p, hi, 4] - twist[p, lo, 4]) * inv
-            dwz = (twist[p, hi, 5] - twist[p, lo, 5]) * inv
-            a1 = _cross(wx, wy, wz, vx, vy, vz)
-            a2 = _cross(dwx, dwy, dwz, rx, ry, rz)
-            wr = _cross(wx, wy, wz, rx, ry, rz)
-            a3 = _cross(wx, wy, wz, wr[0], wr[1], wr[2])
-            for c in range(3):
-                free[c] = (twist[p, hi, c] - twist[p, lo, c]) * inv + a1[c] + a2[c] + a3[c]
-            for c in range(3):
-                accel[k, c] = projector[p, c, 0] * free[0] + projector[p, c, 1] * free[1] + projector[p, c, 2] * free[2]
-            rates[k, 0], rates[k, 1], rates[k, 2], rates[k, 3], rates[k, 4], rates[k, 5] = wx, wy, wz, dwx, dwy, dwz
-        # x'' = -A (k x + c x') - a_tank: the spring-damper force F also accelerates the rest of the robot at
-        # the tank, by Lambda^-1 F, so the relative motion sees the inverse mass A = E / m_s + Lambda^-1;
-        # with k = m_s w^2 and c = 2 zeta m_s w: A (k x + c x') = (E + m_s Lambda^-1) (w^2 x + 2 zeta w x')
-        stiff, damp = omega_n[p] ** 2, 2.0 * zeta[p] * omega_n[p]
-        state[:] = 0.0
-        out[p, 0, :] = 0.0
-        for k in range(1, n_t):
-            h = t_s[k] - t_s[k - 1]
-            for c in range(3):  # the forcing at the step's start, middle and end
-                force[0, c], force[2, c] = accel[k - 1, c], accel[k, c]
-                force[1, c] = 0.5 * (force[0, c] + force[2, c])
-            for c in range(6):
-                spin[0, c], spin[2, c] = rates[k - 1, c], rates[k, c]
-                spin[1, c] = 0.5 * (spin[0, c] + spin[2, c])
-            _oscillator_slope(coupling, p, stiff, damp, state, force, 0, slopes, 0, spin, projector)
-            for s in range(1, 4):
-                fraction = 1.0 if s == 3 else 0.5
-                for i in range(6):
-                    stage[i] = state[i] + fraction * h * slopes[s - 1, i]
-                _oscillator_slope(coupling, p, stiff, damp, stage, force, 1 if s < 3 else 2, slopes, s, spin, projector)
-            for i in range(6):
-                state[i] = state[i] + (h / 6.0) * (slopes[0, i] + 2.0 * slopes[1, i] + 2.0 * slopes[2, i] + slopes[3, i])
-                out[p, k, i] = state[i]  # displacement and its rate for now; momentum below
-        for k in range(n_t):
-            x0, x1, x2_ = out[p, k, 0], out[p, k, 1], out[p, k, 2]
-            v0, v1, v2_ = out[p, k, 3], out[p, k, 4], out[p, k, 5]
-            ang = _cross(rx + x0, ry + x1, rz + x2_, v0, v1, v2_)
-            m = mass[p]
-            out[p, k, 0], out[p, k, 1], out[p, k, 2] = m * v0, m * v1, m * v2_
-            out[p, k, 3], out[p, k, 4], out[p, k, 5] = m * ang[0], m * ang[1], m * ang[2]
-            # point mass at r + x instead of r: first moment and inertia about the origin (xx, xy, yy, xz, yz, zz)
-            px, py, pz = rx + x0, ry + x1, rz + x2_
-            moved[p, k, 1], moved[p, k, 2], moved[p, k, 3] = m * x0, m * x1, m * x2_
-            moved[p, k, 4] = m * ((py * py + pz * pz) - (ry * ry + rz * rz))
-            moved[p, k, 5] = -m * (px * py - rx * ry)
-            moved[p, k, 6] = m * ((px * px + pz * pz) - (rx * rx + rz * rz))
-            moved[p, k, 7] = -m * (px * pz - rx * rz)
-            moved[p, k, 8] = -m * (py * pz - ry * rz)
-            moved[p, k, 9] = m * ((px * px + py * py) - (rx * rx + ry * ry))
-    return out, moved
