@@ -107,6 +107,10 @@ class Parameterisation(ABC):
     def physical(self, theta: FloatArray) -> dict[str, Any]:
         """Physical quantities (floats and arrays) at ``theta`` (k,), with the keys of ``truth.json``."""
 
+    def equivalent(self, theta: FloatArray) -> FloatArray:
+        """The unknowns (k,) predicting the same as ``theta`` within what can physically move; ``theta`` here."""
+        return np.array(theta, dtype=float)
+
 
 def _base_quantities(base10: FloatArray) -> dict[str, Any]:
     body = RigidBodyInertia.from_params10(base10)
@@ -267,6 +271,16 @@ class WithEffects(Parameterisation):
         d_payload = np.zeros((10, self.n_params))
         d_payload[:, self._slices[self._payload]] = np.eye(10)
         return d_base, d_payload
+
+    def equivalent(self, theta: FloatArray) -> FloatArray:
+        """``theta`` (k,) with each term's unknowns replaced by those predicting the same within what the term can
+        physically move (:meth:`~estimators.models.effect_base.EffectTerm.equivalent`: a slosh mass beyond the liquid
+        left in the tank is that liquid)."""
+        out = np.array(theta, dtype=float)
+        base = self.base_part(out)[None]
+        for term, part in self._slices.items():
+            out[part] = term.equivalent(out[part][None], base)[0]
+        return out
 
     def physical(self, theta: FloatArray) -> dict[str, Any]:
         theta = np.asarray(theta, dtype=float)

@@ -297,6 +297,30 @@ def test_a_fit_with_more_slosh_than_liquid_is_implausible(short_fuel_episode) ->
     assert within.plausible
 
 
+def test_a_fit_beyond_the_liquid_left_is_reported_as_that_liquid(short_fuel_episode) -> None:
+    """The prediction is flat in the slosh mass beyond the liquid left (only that liquid moves), so a local fit may
+    stop anywhere there: ``fit_model`` reports the same prediction with the mass at the liquid left, which is plausible
+    (all the liquid sloshing). Held-out slosh log 9505 (1.4 kg sloshing in an almost empty tank) was left
+    ``unexplained``: its fit stopped at 14.4 kg with 1.4 kg left and was judged implausible."""
+    ep = short_fuel_episode
+    model = candidate_model(IdentificationModel(ep.robot, "fuel"), "slosh")
+    problem = model.problem(ep.log)
+    term = problem.parameters.terms[-1]
+    beyond = np.concatenate(([term.upper[0] - 20.0, 0.25, -0.2, 0.1], [60.0, 0.4, 0.05]))  # 20 kg left
+
+    class Stopped:  # an estimator whose fit stopped beyond the liquid
+        def fit_problem(self, problem):
+            return problem.make_estimate(beyond, estimator="test", options={}, seed=None, cost_history=[0.0], wall_time_s=0.0)
+
+    fit = fit_model(model, ep.log, estimator=Stopped(), effect="slosh")[0]  # type: ignore[arg-type]
+    assert fit.theta[4] == pytest.approx(20.0, rel=1e-9) and fit.plausible, (fit.theta, fit.implausible)
+    np.testing.assert_array_equal(fit.theta[:4], beyond[:4])
+    np.testing.assert_array_equal(problem.residuals(beyond, count=False), problem.residuals(fit.theta, count=False))
+    # a local fit from there ends inside what can move, whichever way it goes
+    fit = fit_model(model, ep.log, starts=[beyond], effect="slosh")[0]
+    assert fit.theta[4] <= float(term.liquid_of(fit.theta[None, :4])[0]) and fit.plausible
+
+
 def test_parameter_errors_use_the_bound_at_the_truth(paper6: Robot, short_fuel_episode) -> None:
     """An estimate 2.5 times high in mdf carries a tank bound too small (it scales as 1 / mdf): the z-scores divide by
     the bound at the true parameters (payload off, as in the truth), and the estimate's own bound is kept beside it."""

@@ -216,6 +216,9 @@ def fit_model(
         else:
             scores = [float(r @ r) for r in (problem.residuals(x, count=False) for x in results)]
             theta = results[int(np.argmin(scores))]
+    # the same prediction within what the effects can physically move (a slosh mass beyond the liquid left is that
+    # liquid: the prediction is flat beyond it, so a fit may stop anywhere there)
+    theta = problem.parameters.equivalent(theta)
     attitude_chi2, attitude_information, attitude_white_p, noise = None, None, math.nan, None
     if channel is not None:
         assert weights is not None

@@ -151,6 +151,11 @@ class EffectTerm(ABC):
     def physical(self, theta: FloatArray) -> dict[str, Any]:
         """The fitted effect as physical quantities at ``theta`` (k_e,) (keys as in ``truth.json``'s ``hidden_effects``)."""
 
+    def equivalent(self, theta: FloatArray, theta_base: FloatArray) -> FloatArray:
+        """``theta`` (P, k_e) with the base parameters ``theta_base`` (P, k_base): the unknowns that predict the same
+        within what the term can physically move; the same by default."""
+        return np.array(theta, dtype=float)
+
     def implausible(
         self, theta: FloatArray, covariance: FloatArray | None = None, theta_base: FloatArray | None = None
     ) -> list[str]:

@@ -165,9 +165,9 @@ class Slosh(EffectTerm):
     frequency: :meth:`grid` offers a log-spaced scan of the whole band to choose the local fits' starts from. Only
     liquid still in the tank can slosh: ``liquid_of`` gives it for the base parameters (with the fuel parameters, the
     usable fuel minus the fuel consumed; else the usable fuel). A larger ``m_s`` moves only the liquid there is
-    (:meth:`moving_part`; the prediction is flat in ``m_s`` beyond it) and such a fit is implausible: subtracting more
-    than the liquid from the base leaves a "rest" that is not a body, whose coupling makes the oscillator unstable
-    (the prediction overflowed before this limit).
+    (:meth:`moving_part`; the prediction is flat in ``m_s`` beyond it, so a fit there is reported as all the liquid
+    sloshing, :meth:`equivalent`): subtracting more than the liquid from the base would leave a "rest" that is not a
+    body, whose coupling makes the oscillator unstable (the prediction overflowed before this limit).
     """
 
     name = "slosh"
@@ -251,10 +251,12 @@ class Slosh(EffectTerm):
         return rod_axis(theta[:, 3], theta[:, 4]), np.array(theta[:, 5], dtype=float)
 
     def moving_part(self, theta: FloatArray, theta_base: FloatArray) -> FloatArray:
-        """``theta`` (P, 3) with the slosh mass limited to the liquid left in the tank for ``theta_base`` (P, k_base)."""
+        """``theta`` (P, k_e) with the slosh mass limited to the liquid left in the tank for ``theta_base`` (P, k_base)."""
         out = np.array(theta, dtype=float)
         out[:, 0] = np.minimum(out[:, 0], self.liquid_of(np.atleast_2d(theta_base)))
         return out
+
+    equivalent = moving_part  # a mass beyond the liquid left moves only that liquid: the same prediction
 
     def starts(self, theta_base: FloatArray | None = None) -> list[FloatArray]:
         """One per :attr:`START_FREQUENCIES_HZ`, with a tenth of the usable fuel sloshing, or half the liquid left
