@@ -41,13 +41,13 @@ def cross3(ax: float, ay: float, az: float, bx: float, by: float, bz: float) -> 
 
 
 @njit(cache=True, inline="always")
-def frame_terms(spin: FloatArray, point: FloatArray) -> tuple[float, float, float]:
+def frame_terms(spin: FloatArray, row: int, point: FloatArray) -> tuple[float, float, float]:
     """The acceleration terms of a displacement ``x`` moving at ``x'`` (``point`` = ``[x; x']``, base axes) in the
-    rotating base frame, ``2 omega x x' + domega/dt x x + omega x (omega x x)``, for ``spin`` = ``[omega; domega/dt]``
-    (base axes): Coriolis, Euler and centripetal."""
-    wx, wy, wz = spin[0], spin[1], spin[2]
+    rotating base frame, ``2 omega x x' + domega/dt x x + omega x (omega x x)``, for ``spin[row, 3:9]`` = ``[omega;
+    domega/dt]`` (base axes): Coriolis, Euler and centripetal."""
+    wx, wy, wz = spin[row, 3], spin[row, 4], spin[row, 5]
     c1 = cross3(wx, wy, wz, point[3], point[4], point[5])
-    c2 = cross3(spin[3], spin[4], spin[5], point[0], point[1], point[2])
+    c2 = cross3(spin[row, 6], spin[row, 7], spin[row, 8], point[0], point[1], point[2])
     w_x = cross3(wx, wy, wz, point[0], point[1], point[2])
     c3 = cross3(wx, wy, wz, w_x[0], w_x[1], w_x[2])
     return 2.0 * c1[0] + c2[0] + c3[0], 2.0 * c1[1] + c2[1] + c3[1], 2.0 * c1[2] + c2[2] + c3[2]
@@ -56,8 +56,8 @@ def frame_terms(spin: FloatArray, point: FloatArray) -> tuple[float, float, floa
 @njit(cache=True, inline="always")
 def slosh_slope(
     point: FloatArray,
-    accel: FloatArray,
-    spin: FloatArray,
+    forcing: FloatArray,
+    row: int,
     coupling: FloatArray,
     stiff: float,
     damp: float,
@@ -65,10 +65,12 @@ def slosh_slope(
     kappa: float,
     rod: bool,
     out: FloatArray,
+    s: int,
 ) -> None:
-    """``out`` (6,) = ``[x'; x'']`` at ``point`` = ``[x; x']`` (module docstring): the tank's acceleration ``accel`` (3,),
-    ``spin`` = ``[omega; domega/dt]`` (6,), the coupling ``C`` (3, 3), ``stiff = w^2``, ``damp = 2 zeta w``, and with
-    ``rod`` the pendulum's axis ``a`` (3,) and curvature ``kappa``. Real or complex, all alike."""
+    """``out[s]`` (6,) = ``[x'; x'']`` at ``point`` = ``[x; x']`` (module docstring), with ``forcing[row]`` = ``[a_tank;
+    omega; domega/dt]`` (9,; the tank's acceleration and the base's rates), the coupling ``C`` (3, 3), ``stiff = w^2``,
+    ``damp = 2 zeta w``, and with ``rod`` the pendulum's axis ``a`` (3,) and curvature ``kappa``. Real or complex, all
+    alike; indices rather than views, which cost in the integration's innermost loop."""
     x0, x1, x2, v0, v1, v2 = point[0], point[1], point[2], point[3], point[4], point[5]
     if rod:
         ax = axis[0] * x0 + axis[1] * x1 + axis[2] * x2
@@ -77,29 +79,27 @@ def slosh_slope(
         f2 = -stiff * (x2 + ax * axis[2] + kappa * ax * x2) - damp * v2
     else:
         f0, f1, f2 = -stiff * x0 - damp * v0, -stiff * x1 - damp * v1, -stiff * x2 - damp * v2
-    g = frame_terms(spin, point)
-    b0, b1, b2 = accel[0] + g[0], accel[1] + g[1], accel[2] + g[2]
+    g = frame_terms(forcing, row, point)
+    b0, b1, b2 = forcing[row, 0] + g[0], forcing[row, 1] + g[1], forcing[row, 2] + g[2]
     cf0 = coupling[0, 0] * f0 + coupling[0, 1] * f1 + coupling[0, 2] * f2
     cf1 = coupling[1, 0] * f0 + coupling[1, 1] * f1 + coupling[1, 2] * f2
     cf2 = coupling[2, 0] * f0 + coupling[2, 1] * f1 + coupling[2, 2] * f2
-    out[0], out[1], out[2] = v0, v1, v2
-    out[3], out[4], out[5] = cf0 - b0, cf1 - b1, cf2 - b2
+    a0, a1, a2 = cf0 - b0, cf1 - b1, cf2 - b2
     if rod:
         n0, n1, n2 = axis[0] + kappa * x0, axis[1] + kappa * x1, axis[2] + kappa * x2
         cn0 = coupling[0, 0] * n0 + coupling[0, 1] * n1 + coupling[0, 2] * n2
         cn1 = coupling[1, 0] * n0 + coupling[1, 1] * n1 + coupling[1, 2] * n2
         cn2 = coupling[2, 0] * n0 + coupling[2, 1] * n1 + coupling[2, 2] * n2
-        tension = (n0 * (cf0 - b0) + n1 * (cf1 - b1) + n2 * (cf2 - b2) + kappa * (v0 * v0 + v1 * v1 + v2 * v2)) / (
-            n0 * cn0 + n1 * cn1 + n2 * cn2
-        )
-        out[3], out[4], out[5] = out[3] - tension * cn0, out[4] - tension * cn1, out[5] - tension * cn2
+        tension = (n0 * a0 + n1 * a1 + n2 * a2 + kappa * (v0 * v0 + v1 * v1 + v2 * v2)) / (n0 * cn0 + n1 * cn1 + n2 * cn2)
+        a0, a1, a2 = a0 - tension * cn0, a1 - tension * cn1, a2 - tension * cn2
+    out[s, 0], out[s, 1], out[s, 2], out[s, 3], out[s, 4], out[s, 5] = v0, v1, v2, a0, a1, a2
 
 
 @njit(cache=True, inline="always")
-def tank_forcing(twist: FloatArray, t_s: FloatArray, tank: FloatArray, k: int, accel: FloatArray, spin: FloatArray) -> None:
-    """At sample ``k`` of the rest's twists (T, 6) ``[v; omega]`` (base origin, base axes): ``accel`` (3,) the tank
-    point's inertial acceleration ``dv/dt + omega x v + domega/dt x r + omega x (omega x r)`` and ``spin`` (6,) ``[omega;
-    domega/dt]``, the time derivatives by central differences (one-sided at the ends)."""
+def tank_forcing(twist: FloatArray, t_s: FloatArray, tank: FloatArray, k: int, forcing: FloatArray) -> None:
+    """At sample ``k`` of the rest's twists (T, 6) ``[v; omega]`` (base origin, base axes): ``forcing[k]`` = ``[a_tank;
+    omega; domega/dt]``, the tank point's inertial acceleration ``dv/dt + omega x v + domega/dt x r + omega x (omega x
+    r)`` and the base's rates, the time derivatives by central differences (one-sided at the ends)."""
     n_t = twist.shape[0]
     lo, hi = max(k - 1, 0), min(k + 1, n_t - 1)
     inv = 1.0 / (t_s[hi] - t_s[lo])
@@ -113,8 +113,8 @@ def tank_forcing(twist: FloatArray, t_s: FloatArray, tank: FloatArray, k: int, a
     wr = cross3(wx, wy, wz, rx, ry, rz)
     a3 = cross3(wx, wy, wz, wr[0], wr[1], wr[2])
     for c in range(3):
-        accel[c] = (twist[hi, c] - twist[lo, c]) * inv + a1[c] + a2[c] + a3[c]
-    spin[0], spin[1], spin[2], spin[3], spin[4], spin[5] = wx, wy, wz, dwx, dwy, dwz
+        forcing[k, c] = (twist[hi, c] - twist[lo, c]) * inv + a1[c] + a2[c] + a3[c]
+    forcing[k, 3], forcing[k, 4], forcing[k, 5], forcing[k, 6], forcing[k, 7], forcing[k, 8] = wx, wy, wz, dwx, dwy, dwz
 
 
 @njit(cache=True, inline="always")
@@ -161,24 +161,25 @@ def integrate_slosh(
     state, stage, slopes = work[2 * n_t, :6], work[2 * n_t + 1, :6], work[2 * n_t + 2 : 2 * n_t + 6, :6]
     step = work[2 * n_t + 6 : 2 * n_t + 9]  # the forcing at a step's start, middle and end
     for k in range(n_t):
-        tank_forcing(twist, t_s, tank, k, forcing[k, :3], forcing[k, 3:])
+        tank_forcing(twist, t_s, tank, k, forcing)
     stiff, damp = omega_n * omega_n, 2.0 * zeta * omega_n
-    state[:] = 0.0
-    for k in range(n_t):
-        if k > 0:
-            h = t_s[k] - t_s[k - 1]
-            for i in range(9):
-                step[0, i], step[2, i] = forcing[k - 1, i], forcing[k, i]
-                step[1, i] = 0.5 * (step[0, i] + step[2, i])
-            for s in range(4):  # RK4 stages: the step's start, its middle twice, its end
-                fraction = 1.0 if s == 3 else 0.5
-                for i in range(6):
-                    stage[i] = state[i] + fraction * h * slopes[s - 1, i] if s > 0 else state[i]
-                row = step[0 if s == 0 else (1 if s < 3 else 2)]
-                slosh_slope(stage, row[:3], row[3:], coupling, stiff, damp, axis, kappa, rod, slopes[s])
+    for i in range(6):
+        state[i] = 0.0 * stiff
+        states[0, i] = state[i]
+    for k in range(1, n_t):
+        h = t_s[k] - t_s[k - 1]
+        for i in range(9):
+            step[0, i], step[2, i] = forcing[k - 1, i], forcing[k, i]
+            step[1, i] = 0.5 * (step[0, i] + step[2, i])
+        slosh_slope(state, step, 0, coupling, stiff, damp, axis, kappa, rod, slopes, 0)
+        for s in range(1, 4):  # RK4: the step's middle twice, its end
+            fraction = 1.0 if s == 3 else 0.5
             for i in range(6):
-                state[i] = state[i] + (h / 6.0) * (slopes[0, i] + 2.0 * slopes[1, i] + 2.0 * slopes[2, i] + slopes[3, i])
-        states[k, :] = state
+                stage[i] = state[i] + fraction * h * slopes[s - 1, i]
+            slosh_slope(stage, step, 1 if s < 3 else 2, coupling, stiff, damp, axis, kappa, rod, slopes, s)
+        for i in range(6):
+            state[i] = state[i] + (h / 6.0) * (slopes[0, i] + 2.0 * slopes[1, i] + 2.0 * slopes[2, i] + slopes[3, i])
+            states[k, i] = state[i]
     slosh_outputs(states, tank, mass, out, moved)
 
 
