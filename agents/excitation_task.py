@@ -67,6 +67,7 @@ class ExcitationTask:
         train_control_period_s: the env's control period while training, s (a divisor of the decision period).
         default_attitude_weight: nats per degree of peak base attitude excursion, ``None`` for a fixed base.
         default_timesteps: the default training's length, decisions.
+        log_std_init: PPO's initial log std of its Gaussian actions (how widely the training explores).
         make_env: the training wrapper.
         features: the policy's observation.
         joint_limits: ``robot -> (lower_rad, upper_rad, rate_limit_rad_s)``.
@@ -79,6 +80,7 @@ class ExcitationTask:
     train_control_period_s: float
     default_attitude_weight: float | None
     default_timesteps: int
+    log_std_init: float
     make_env: MakeEnv
     features: Features
     joint_limits: Callable[[Any], tuple[FloatArray, FloatArray, FloatArray]]

@@ -197,6 +197,7 @@ SATELLITE_TASK = ExcitationTask(
     train_control_period_s=TRAIN_CONTROL_PERIOD_S,
     default_attitude_weight=DEFAULT_ATTITUDE_WEIGHT,
     default_timesteps=DEFAULT_TIMESTEPS,
+    log_std_init=0.0,
     make_env=make_satellite_env,
     features=policy_features,
     joint_limits=satellite_joint_limits,
@@ -377,6 +378,7 @@ def train_excitation(
     eval_episodes: int = 4,
     n_evaluations: int = 5,
     progress_bar: bool = True,
+    log_std_init: float | None = None,
 ) -> ExcitationPolicy:
     """Train an excitation policy for ``robot`` (module docstring; a shipped arm such as ``"ur5"``:
     :mod:`agents.arm_policy`) and save it to ``out`` if given.
@@ -395,6 +397,8 @@ def train_excitation(
         attitude_weight: nats per degree of peak base attitude excursion (satellites only; ``None``: 0.05).
         eval_episodes, n_evaluations: the evaluation callback's episodes per evaluation and evaluations per run.
         progress_bar: show a progress bar.
+        log_std_init: PPO's initial log std of its Gaussian actions (the training's exploration; the saved policy
+            acts with the mean); ``None``: the task's (0 for a satellite, -1 for an arm).
     """
     task = task_for_robot(robot)
     timesteps = task.default_timesteps if timesteps is None else timesteps
@@ -405,6 +409,9 @@ def train_excitation(
         raise SpaceIdInputError(f"params: the agent for {robot!r} is trained for {list(task.params)}, got {params!r}")
     if algorithm not in ALGORITHMS:
         raise SpaceIdInputError(f"algorithm: expected one of {sorted(ALGORITHMS)}, got {algorithm!r}")
+    log_std_init = task.log_std_init if log_std_init is None else log_std_init
+    if not math.isfinite(log_std_init):
+        raise SpaceIdInputError(f"log_std_init: expected a finite number, got {log_std_init!r}")
     if isinstance(n_envs, bool) or not isinstance(n_envs, int) or not 1 <= n_envs <= 64:
         raise SpaceIdInputError(f"n_envs: expected an integer from 1 to 64, got {n_envs!r}")
     if attitude_weight is not None:
@@ -432,7 +439,8 @@ def train_excitation(
         n_steps = max(8, min(2 * decisions, timesteps // n_envs))
         model: BaseAlgorithm = PPO(
             "MlpPolicy", train, n_steps=n_steps, batch_size=max(8, n_steps // 2), learning_rate=3e-4, gamma=0.99,
-            gae_lambda=0.95, n_epochs=10, seed=seed, device="cpu", verbose=0, policy_kwargs={"net_arch": [64, 64]},
+            gae_lambda=0.95, n_epochs=10, seed=seed, device="cpu", verbose=0,
+            policy_kwargs={"net_arch": [64, 64], "log_std_init": log_std_init},
         )  # fmt: skip
     else:
         model = SAC(
@@ -467,6 +475,7 @@ def train_excitation(
         "decision_period_s": DECISION_PERIOD_S,
         "window_s": task.window_s,
         "attitude_weight_nats_per_deg": attitude_weight,
+        "log_std_init": log_std_init if algorithm == "ppo" else None,
         "observation_mean": train.obs_rms.mean.tolist(),
         "observation_var": train.obs_rms.var.tolist(),
         "observation_epsilon": float(train.epsilon),

@@ -103,6 +103,8 @@ def test_bad_arm_policy_inputs_name_what_is_wrong(arm_policy: Path, tmp_path: Pa
         train_excitation("ur5", params="fuel", timesteps=10)
     with pytest.raises(SpaceIdInputError, match="fixed base"):
         train_excitation("ur5", timesteps=10, attitude_weight=0.1)
+    with pytest.raises(SpaceIdInputError, match="log_std_init: expected a finite number"):
+        train_excitation("ur5", timesteps=10, log_std_init=float("nan"))
     corrupt = tmp_path / "corrupt"
     corrupt.mkdir()
     (corrupt / "policy.json").write_text((arm_policy / "policy.json").read_text())
