@@ -15,14 +15,18 @@ normalised joint-rate commands (time, s -> action in [-1, 1]):
 * ``fourier``: the arm's optimised Fourier trajectory
   (:func:`~spaceid_gym.arm.excitation_design.optimise_excitation`, condition-number criterion, 5 harmonics of
   0.1 Hz, seeded starts), its rates ``dq(t) / rate limit`` followed from the env's start pose;
-* ``fourier_d``: the same optimised for D-optimality.
+* ``fourier_d``: the same optimised for D-optimality;
+* ``policy`` (when a policy folder is given): the learnt excitation of :mod:`agents.arm_policy`, which picks a target
+  angle per joint every 0.5 s from the measured state and the information so far;
+* ``random_targets`` (with ``policy``): the policy's action space without the learning, uniform random targets every
+  0.5 s followed like the policy's (:class:`~agents.policy.RandomTargets`, seeded by the window's seed).
 
 Per window and method: the env's excitation measures of the torque data about the 48 base parameters in prior-std
 units (:meth:`ManipulatorIDEnv.excitation_measures`): D-optimality ``log det F``, the condition number of ``F`` (the
 square of the scaled, noise-weighted regressor's) and the largest Cramér-Rao std; the error of a least-squares fit
 of the base parameters to the window's log (weighted by the known torque noise; measured angles and rates, the
 simulator's true acceleration), in prior stds: median and largest over the 48; and the env's limit penalties summed
-over the window (0 when no joint or torque came near its limit). No learnt policy is trained for the arm.
+over the window (0 when no joint or torque came near its limit).
 """
 
 from __future__ import annotations
@@ -35,11 +39,12 @@ from typing import Any
 import numpy as np
 
 from agents.comparison import write_tables
-from agents.policy import HELD_OUT_FIRST_SEED
+from agents.policy import HELD_OUT_FIRST_SEED, ExcitationPolicy, RandomTargets
 from estimators.arm.linear_ls import weighted_lstsq
 from estimators.arm.linear_problem import LinearIdentificationProblem
 from spaceid_gym.arm.excitation_design import ExcitationResult, optimise_excitation
 from spaceid_gym.arm.joint_sensors import ArmSensorModel
+from spaceid_gym.datasets import FeedbackExcitation
 from spaceid_gym.envs.manipulator import ManipulatorIDEnv
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.excitation import FourierExcitation
@@ -47,10 +52,12 @@ from spaceid_gym.fuel_excitation_design import OneJointExcitation
 
 #: the methods, in table order
 ARM_METHODS = ("random", "random_0.1hz", "one_joint", "fourier", "fourier_d")
+#: the methods added after them when a policy is given
+ARM_POLICY_METHODS = ("policy", "random_targets")
 #: the optimised trajectories' criteria (:func:`optimise_excitation`)
 _CRITERIA = {"fourier": "condition", "fourier_d": "d-optimal"}
 
-Command = Callable[[float], np.ndarray]
+Command = Callable[[float], np.ndarray] | FeedbackExcitation
 
 
 def optimise_arm_designs(env: ManipulatorIDEnv, seed: int = 0, n_starts: int = 2) -> dict[str, ExcitationResult]:
@@ -64,26 +71,39 @@ def optimise_arm_designs(env: ManipulatorIDEnv, seed: int = 0, n_starts: int = 2
     }
 
 
-def _commands(env: ManipulatorIDEnv, designs: dict[str, ExcitationResult], duration_s: float, seed: int) -> dict[str, Command]:
+def _commands(
+    env: ManipulatorIDEnv,
+    designs: dict[str, ExcitationResult],
+    duration_s: float,
+    seed: int,
+    policy: ExcitationPolicy | None,
+) -> dict[str, Command]:
     n, limit = env.robot.n_joints, env.robot.dq_limit_rad_s
 
     def follow(result: ExcitationResult) -> Command:
         return lambda t: np.clip(result.trajectory.state(t)[1] / limit, -1.0, 1.0)
 
-    return {
+    commands: dict[str, Command] = {
         "random": FourierExcitation(n, seed),
         "random_0.1hz": FourierExcitation(n, seed, base_frequency_hz=0.1),
         "one_joint": OneJointExcitation(n, duration_s),
         **{name: follow(result) for name, result in designs.items()},
     }
+    if policy is not None:
+        commands.update(policy=policy, random_targets=RandomTargets(seed))
+    return commands
 
 
 def _window(env: ManipulatorIDEnv, command: Command, seed: int, steps: int) -> dict[str, float]:
     """Drive one window and return its measures (see the module docstring)."""
-    _, info = env.reset(seed=seed)
+    observation, info = env.reset(seed=seed)
+    feedback = isinstance(command, FeedbackExcitation)
+    if feedback:
+        command.start(env)
     penalty = 0.0
     for k in range(steps):
-        *_, info = env.step(np.asarray(command(k * env.control_period_s), dtype=np.float32))
+        action = command.act(observation) if feedback else command(k * env.control_period_s)
+        observation, _, _, _, info = env.step(np.asarray(action, dtype=np.float32))
         penalty += info["penalty_joint_limit"] + info["penalty_torque_limit"]
     measures = env.excitation_measures()
     log = env.measurement_log()
@@ -112,8 +132,10 @@ def run_arm_comparison(
     first_window: int = 0,
     designs: dict[str, ExcitationResult] | None = None,
     env: ManipulatorIDEnv | None = None,
+    policy: ExcitationPolicy | None = None,
 ) -> list[dict[str, Any]]:
-    """One row per window and method (:data:`ARM_METHODS` order within a window); see the module docstring.
+    """One row per window and method (:data:`ARM_METHODS` order within a window, then :data:`ARM_POLICY_METHODS` with
+    a policy); see the module docstring.
 
     Args:
         episodes: windows (>= 1).
@@ -121,6 +143,7 @@ def run_arm_comparison(
         first_window: index of the first window (>= 0): windows ``first_window .. first_window + episodes - 1``.
         designs: the optimised trajectories (default :func:`optimise_arm_designs` with seed 0).
         env: the env (default ``ManipulatorIDEnv()``; the sensors must be noisy, the default).
+        policy: a learnt excitation for the env's arm (adds the ``policy`` and ``random_targets`` rows).
     """
     if not isinstance(episodes, int) or episodes < 1:
         raise SpaceIdInputError(f"episodes: expected an integer >= 1, got {episodes!r}")
@@ -136,7 +159,7 @@ def run_arm_comparison(
     rows = []
     for i in range(first_window, first_window + episodes):
         seed = HELD_OUT_FIRST_SEED + i
-        for method, command in _commands(env, designs, duration_s, seed).items():
+        for method, command in _commands(env, designs, duration_s, seed, policy).items():
             rows.append({"method": method, "window": i, "seed": seed, **_window(env, command, seed, steps)})
     return rows
 

@@ -14,9 +14,9 @@ import time
 from pathlib import Path
 from typing import Any
 
-from agents.arm_comparison import ARM_METHODS, optimise_arm_designs, run_arm_comparison, write_arm_comparison
+from agents.arm_comparison import optimise_arm_designs, run_arm_comparison, write_arm_comparison
 from agents.comparison import run_comparison, write_comparison
-from agents.policy import DEFAULT_ATTITUDE_WEIGHT, ExcitationPolicy, train_excitation
+from agents.policy import ExcitationPolicy, train_excitation
 from spaceid_gym.datasets import Excitation, FeedbackExcitation
 from spaceid_gym.envs.manipulator import ManipulatorIDEnv
 from spaceid_gym.errors import SpaceIdInputError
@@ -43,13 +43,24 @@ def add_excite_arguments(sub: Any) -> None:
     fourier.add_argument("--seed", type=int, default=0, help="seed of the random starts")
     fourier.add_argument("--out", type=Path, required=True, help="JSON file to write")
 
-    train = commands.add_parser("train", help="train an excitation policy (stable-baselines3) on FreeFloatingID-v0")
-    train.add_argument("--robot", default="paper6", help="shipped robot name (default paper6)")
-    train.add_argument("--params", default="fuel", help="parameters whose information is rewarded (fuel)")
-    train.add_argument("--timesteps", type=int, default=200_000, help="agent decisions (0.5 s each) to train for")
+    train = commands.add_parser(
+        "train", help="train an excitation policy (stable-baselines3) on FreeFloatingID-v0, or ManipulatorID-v0 for an arm"
+    )
+    train.add_argument(
+        "--robot", default="paper6", help="shipped robot name (default paper6), or a shipped arm (ur5: ManipulatorID-v0)"
+    )
+    train.add_argument(
+        "--params", default=None, help="parameters whose information is rewarded (fuel for a satellite, base for an arm)"
+    )
+    train.add_argument(
+        "--timesteps", type=int, default=None, help="agent decisions (0.5 s each) to train for (default 200000; ur5 60000)"
+    )
     train.add_argument("--algorithm", default="ppo", choices=["ppo", "sac"], help="ppo (default) or sac")
     train.add_argument(
-        "--attitude-weight", type=float, default=None, help="nats per degree of peak base attitude excursion (default 0.05)"
+        "--attitude-weight",
+        type=float,
+        default=None,
+        help="nats per degree of peak base attitude excursion (satellites only; default 0.05)",
     )
     train.add_argument("--envs", type=int, default=2, help="parallel envs (default 2)")
     train.add_argument("--vec-env", default="dummy", choices=["dummy", "subproc"], help="DummyVecEnv (default) or SubprocVecEnv")
@@ -71,12 +82,17 @@ def add_excite_arguments(sub: Any) -> None:
     compare.add_argument("--out", type=Path, required=True, help="output folder")
 
     arm = commands.add_parser(
-        "compare-arm", help="the arm (ManipulatorID-v0): random, one joint at a time and optimised Fourier on the same windows"
+        "compare-arm",
+        help="the arm (ManipulatorID-v0): random, one joint at a time, optimised Fourier and a policy on the same windows",
     )
     arm.add_argument("--episodes", type=int, default=20, help="windows (default 20)")
     arm.add_argument("--first-window", type=int, default=0, help="index of the first window (default 0)")
     arm.add_argument("--duration", type=float, default=30.0, help="window, s (default 30, the env's)")
     arm.add_argument("--seed", type=int, default=0, help="seed of the optimised trajectories' random starts")
+    arm.add_argument(
+        "--policy", type=Path, default=None, help="policy folder for the arm (default: the shipped one, agents/policies/ur5)"
+    )
+    arm.add_argument("--no-policy", action="store_true", help="leave out the policy and random_targets rows")
     arm.add_argument("--out", type=Path, required=True, help="output folder")
 
 
@@ -115,14 +131,12 @@ def _fourier(args: argparse.Namespace) -> None:
 
 
 def _train(args: argparse.Namespace) -> None:
-    weight = DEFAULT_ATTITUDE_WEIGHT if args.attitude_weight is None else args.attitude_weight
     policy = train_excitation(
         args.robot, args.params, args.timesteps, args.out, algorithm=args.algorithm, seed=args.seed, n_envs=args.envs,
-        vec_env=args.vec_env, attitude_weight=weight,
+        vec_env=args.vec_env, attitude_weight=args.attitude_weight,
     )  # fmt: skip
-    print(
-        f"wrote {args.out}/ (policy.json, model.zip): {args.timesteps} steps in {policy.metadata['training_wall_time_s']:.0f} s"
-    )
+    meta = policy.metadata
+    print(f"wrote {args.out}/ (policy.json, model.zip): {meta['timesteps']} steps in {meta['training_wall_time_s']:.0f} s")
 
 
 def _compare(args: argparse.Namespace) -> None:
@@ -159,15 +173,22 @@ def _compare_arm(args: argparse.Namespace) -> None:
         raise SpaceIdInputError(f"--first-window: expected an index >= 0, got {args.first_window}")
     if not (math.isfinite(args.duration) and args.duration > 0):
         raise SpaceIdInputError(f"--duration: expected a window > 0 s, got {args.duration}")
+    if args.no_policy and args.policy is not None:
+        raise SpaceIdInputError("--policy and --no-policy: give one of them")
     started = time.perf_counter()
     env = ManipulatorIDEnv()
+    policy, folder = None, None
+    if not args.no_policy:
+        folder = args.policy if args.policy is not None else SHIPPED_POLICIES / env.robot.name
+        policy = ExcitationPolicy.load(folder, robot=env.robot.name, params="base")  # checks it before the long run
     print(f"optimising the arm's Fourier trajectories (seed {args.seed}) ...")
     designs = optimise_arm_designs(env, seed=args.seed)
-    rows = run_arm_comparison(args.episodes, args.duration, args.first_window, designs, env)
+    rows = run_arm_comparison(args.episodes, args.duration, args.first_window, designs, env, policy)
     info = {"robot": env.robot.name, "episodes": args.episodes, "first_window": args.first_window, "duration_s": args.duration,
-            "design_seed": args.seed, "wall_time_s": round(time.perf_counter() - started, 1)}  # fmt: skip
+            "design_seed": args.seed, "policy": None if folder is None else str(folder),
+            "wall_time_s": round(time.perf_counter() - started, 1)}  # fmt: skip
     paths = write_arm_comparison(args.out, rows, info)
     print(paths["table"].read_text())
     print(
-        f"{args.episodes} windows x {len(ARM_METHODS)} methods in {info['wall_time_s']:.0f} s; wrote {', '.join(p.name for p in paths.values())}"
+        f"{args.episodes} windows x {len({r['method'] for r in rows})} methods in {info['wall_time_s']:.0f} s; wrote {', '.join(p.name for p in paths.values())}"
     )

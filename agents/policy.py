@@ -48,33 +48,36 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import torch
-from gymnasium import spaces
 from numpy.typing import NDArray
 from stable_baselines3 import PPO, SAC
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList, CheckpointCallback, EvalCallback
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv, VecNormalize
-from tqdm import tqdm
 
+from agents.arm_policy import ARM_TASK
+from agents.excitation_task import (
+    DECISION_PERIOD_S,
+    HELD_OUT_FIRST_SEED,
+    VALIDATION_FIRST_SEED,
+    ExcitationTask,
+    HeldTargetsEnv,
+    target_rate_command,
+)
+from agents.progress import ProgressBar
+from spaceid_gym.arm.arm_robot import available_arms
 from spaceid_gym.arrays import FloatArray
 from spaceid_gym.envs.free_floating import FreeFloatingIDEnv
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.mission import FuelSchedule
 from spaceid_gym.robots import Robot, load_robot
 
-#: the agent decides this often, s
-DECISION_PERIOD_S = 0.5
 #: the env's control period while training, s (10 Hz)
 TRAIN_CONTROL_PERIOD_S = 0.1
 #: the identification window, s
 WINDOW_S = 60.0
 #: nats of reward lost per degree of peak base attitude excursion (module docstring)
 DEFAULT_ATTITUDE_WEIGHT = 0.05
-#: training draws satellites with seeds below this; the evaluation callback from it
-VALIDATION_FIRST_SEED = 900_000
-#: comparisons draw satellites with seeds from this one (never trained on)
-HELD_OUT_FIRST_SEED = 1_000_000
 #: parameterisations the agent can be trained for (the env's reward is the fuel parameters' information)
 PARAMETERISATIONS = ("fuel",)
 #: algorithms of stable-baselines3 offered
@@ -109,17 +112,9 @@ def policy_features(observation: NDArray[np.float32], env: FreeFloatingIDEnv, el
     )
 
 
-#: the position loop's time constant, s: further than rate limit x this from the target the joint runs at full rate
-TARGET_TIME_CONSTANT_S = 0.5
-
-
 def rate_command(action: NDArray[np.float32], q_rad: NDArray[np.float32], robot: Robot) -> NDArray[np.float32]:
     """The normalised rate command (n,) that moves the measured angles ``q_rad`` towards the action's targets."""
-    mid = 0.5 * (robot.q_lower_rad + robot.q_upper_rad)
-    reach = 0.9 * 0.5 * (robot.q_upper_rad - robot.q_lower_rad) - 0.3
-    target = mid + np.clip(np.asarray(action, dtype=float), -1.0, 1.0) * reach
-    u = (target - np.asarray(q_rad, dtype=float)) / (robot.rate_limit_rad_s * TARGET_TIME_CONSTANT_S)
-    return np.clip(u, -1.0, 1.0).astype(np.float32)
+    return target_rate_command(action, q_rad, robot.q_lower_rad, robot.q_upper_rad, robot.rate_limit_rad_s)
 
 
 def attitude_excursion_deg(env: FreeFloatingIDEnv) -> float:
@@ -128,7 +123,11 @@ def attitude_excursion_deg(env: FreeFloatingIDEnv) -> float:
     return math.degrees(math.acos(min(1.0, max(-1.0, 0.5 * (float(np.trace(rotation)) - 1.0)))))
 
 
-class ExcitationEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
+def satellite_joint_limits(robot: Robot) -> tuple[FloatArray, FloatArray, FloatArray]:
+    return robot.q_lower_rad, robot.q_upper_rad, robot.rate_limit_rad_s
+
+
+class ExcitationEnv(HeldTargetsEnv):
     """``FreeFloatingID-v0`` as the agent sees it: decisions, features and the attitude term (module docstring).
 
     Args:
@@ -139,8 +138,6 @@ class ExcitationEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         window_s: the window, s.
     """
 
-    metadata: dict[str, Any] = {"render_modes": []}  # noqa: RUF012 (gymnasium's convention)
-
     def __init__(
         self,
         robot: str | Robot = "paper6",
@@ -150,14 +147,10 @@ class ExcitationEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         n_seeds: int = VALIDATION_FIRST_SEED,
         window_s: float = WINDOW_S,
     ) -> None:
-        self.env = FreeFloatingIDEnv(robot, control_period_s=control_period_s)
-        self.hold_steps = max(1, round(DECISION_PERIOD_S / control_period_s))
-        self.decisions = max(1, round(window_s / DECISION_PERIOD_S))
+        env = FreeFloatingIDEnv(robot, control_period_s=control_period_s)
+        limits = satellite_joint_limits(env.robot)
+        super().__init__(env, policy_features, limits, 2 * env.robot.n_joints + 17, window_s, first_seed, n_seeds)
         self.attitude_weight = check_attitude_weight(attitude_weight)
-        self.first_seed, self.n_seeds = int(first_seed), int(n_seeds)
-        n = self.env.robot.n_joints
-        self.action_space = spaces.Box(-1.0, 1.0, shape=(n,), dtype=np.float32)
-        self.observation_space = spaces.Box(-np.inf, np.inf, shape=(2 * n + 17,), dtype=np.float32)
         self._schedule = FuelSchedule()
 
     def reset(
@@ -165,31 +158,23 @@ class ExcitationEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     ) -> tuple[NDArray[np.float32], dict[str, Any]]:
         super().reset(seed=seed)
         options = dict(options or {})
-        satellite = int(options.pop("satellite_seed", self.first_seed + self.np_random.integers(self.n_seeds)))
+        satellite = int(options.pop("satellite_seed", self._draw_seed()))
         mass = self.env.robot.base_full.mass_kg
         fuel = options.pop("fuel_consumed_kg", None)
         if fuel is None:
             fuel = self.np_random.uniform(self._schedule.initial_fraction, self._schedule.usable_fraction) * mass
         options["fuel_consumed_kg"] = float(fuel)
         observation, info = self.env.reset(seed=satellite, options=options)
-        self._decision, self._peak_deg, self._last = 0, 0.0, observation
-        return self._features(observation), info
+        self._peak_deg = 0.0
+        return self._begin(observation), info
 
     def step(self, action: NDArray[np.float32]) -> tuple[NDArray[np.float32], float, bool, bool, dict[str, Any]]:
-        reward, info = 0.0, {}
-        n = self.env.robot.n_joints
-        for _ in range(self.hold_steps):
-            self._last, r, _, _, info = self.env.step(rate_command(action, self._last[:n], self.env.robot))
-            reward += r
+        reward, info = self._hold(action)
         peak = max(self._peak_deg, attitude_excursion_deg(self.env))
         reward -= self.attitude_weight * (peak - self._peak_deg)
         self._peak_deg = peak
-        self._decision += 1
         info["peak_attitude_excursion_deg"] = peak
-        return self._features(self._last), float(reward), False, self._decision >= self.decisions, info
-
-    def _features(self, observation: NDArray[np.float32]) -> NDArray[np.float32]:
-        return policy_features(observation, self.env, self._decision / self.decisions).astype(np.float32)
+        return self._features(), float(reward), False, self._decision >= self.decisions, info
 
 
 def check_attitude_weight(weight: float) -> float:
@@ -198,9 +183,45 @@ def check_attitude_weight(weight: float) -> float:
     return float(weight)
 
 
+def make_satellite_env(robot: str, first_seed: int, n_seeds: int, attitude_weight: float | None) -> gym.Env:
+    weight = DEFAULT_ATTITUDE_WEIGHT if attitude_weight is None else attitude_weight
+    return ExcitationEnv(robot, attitude_weight=weight, first_seed=first_seed, n_seeds=n_seeds)
+
+
+#: the satellite's learnt excitation (``FreeFloatingID-v0``)
+SATELLITE_TASK = ExcitationTask(
+    env_id="FreeFloatingID-v0",
+    env_type=FreeFloatingIDEnv,
+    params=PARAMETERISATIONS,
+    window_s=WINDOW_S,
+    train_control_period_s=TRAIN_CONTROL_PERIOD_S,
+    default_attitude_weight=DEFAULT_ATTITUDE_WEIGHT,
+    default_timesteps=DEFAULT_TIMESTEPS,
+    log_std_init=0.0,
+    make_env=make_satellite_env,
+    features=policy_features,
+    joint_limits=satellite_joint_limits,
+)
+#: the learnt excitations by env name (``policy.json``'s ``env``; absent in the first format's files: the satellite)
+TASKS = {task.env_id: task for task in (SATELLITE_TASK, ARM_TASK)}
+
+
+def task_for_robot(robot: str) -> ExcitationTask:
+    """The arm's task for a shipped arm's name (``"ur5"``), else the satellite's."""
+    return ARM_TASK if robot in available_arms() else SATELLITE_TASK
+
+
+def task_of_env(env: gym.Env) -> ExcitationTask:
+    """The task whose env ``env`` (unwrapped) is; a clear error for any other env."""
+    for task in TASKS.values():
+        if isinstance(env.unwrapped, task.env_type):
+            return task
+    raise SpaceIdInputError(f"excitation: drives {' or '.join(TASKS)}, got {type(env.unwrapped).__name__}")
+
+
 class ExcitationPolicy:
-    """A trained excitation policy: the action source of ``FreeFloatingID-v0`` (a
-    :class:`~spaceid_gym.datasets.FeedbackExcitation`).
+    """A trained excitation policy: the action source of ``FreeFloatingID-v0`` or ``ManipulatorID-v0`` (whichever it
+    was trained on; a :class:`~spaceid_gym.datasets.FeedbackExcitation`).
 
     Use it with :func:`spaceid_gym.datasets.simulate_episode`, or by hand: ``policy.start(env)`` after
     ``env.reset(...)``, then ``env.step(policy.act(observation))`` every control period.
@@ -208,39 +229,39 @@ class ExcitationPolicy:
 
     def __init__(self, model: BaseAlgorithm, metadata: dict[str, Any]) -> None:
         self.model, self.metadata = model, metadata
+        self.task = TASKS[str(metadata.get("env", SATELLITE_TASK.env_id))]
         self._mean = np.asarray(metadata["observation_mean"], dtype=float)
         self._std = np.sqrt(np.asarray(metadata["observation_var"], dtype=float) + metadata["observation_epsilon"])
         self._clip = float(metadata["observation_clip"])
-        self._env: FreeFloatingIDEnv | None = None
+        self._env: Any = None
 
     @property
     def robot_name(self) -> str:
         return str(self.metadata["robot"])
 
-    def start(self, env: FreeFloatingIDEnv) -> None:
+    def start(self, env: gym.Env) -> None:
         """Begin a window of ``env`` (right after its reset)."""
         unwrapped = env.unwrapped
-        if not isinstance(unwrapped, FreeFloatingIDEnv):
-            raise SpaceIdInputError(f"policy: drives FreeFloatingID-v0, got {type(unwrapped).__name__}")
+        if not isinstance(unwrapped, self.task.env_type):
+            raise SpaceIdInputError(f"policy: drives {self.task.env_id}, got {type(unwrapped).__name__}")
         if unwrapped.robot.name != self.robot_name:
             raise SpaceIdInputError(f"policy: trained for robot {self.robot_name!r}, the env has {unwrapped.robot.name!r}")
         self._env = unwrapped
         self._hold = max(1, round(DECISION_PERIOD_S / unwrapped.control_period_s))
-        self._decisions = max(1, round(WINDOW_S / DECISION_PERIOD_S))
         self._step, self._action = 0, np.zeros(unwrapped.robot.n_joints, dtype=np.float32)
 
     def act(self, observation: NDArray[np.float32]) -> NDArray[np.float32]:
         """The rate command for this control period: a new target every :data:`DECISION_PERIOD_S`, held in between,
-        followed from the measured angles (:func:`rate_command`)."""
+        followed from the measured angles (:func:`~agents.excitation_task.target_rate_command`)."""
         if self._env is None:
             raise SpaceIdInputError("policy: call start(env) after the env's reset, before act()")
         if self._step % self._hold == 0:
-            decision = self._step // self._hold
-            features = policy_features(observation, self._env, min(decision, self._decisions) / self._decisions)
+            decision, decisions = self._step // self._hold, self.task.decisions
+            features = self.task.features(observation, self._env, min(decision, decisions) / decisions)
             normalised = np.clip((features - self._mean) / self._std, -self._clip, self._clip).astype(np.float32)
             self._action = np.asarray(self.model.predict(normalised, deterministic=True)[0], dtype=np.float32)
         self._step += 1
-        return rate_command(self._action, observation[: self._env.robot.n_joints], self._env.robot)
+        return self.task.rate_command(self._action, observation[: self._env.robot.n_joints], self._env.robot)
 
     def save(self, folder: str | Path) -> Path:
         """Write ``policy.json`` and ``model.zip`` into ``folder``."""
@@ -270,8 +291,11 @@ class ExcitationPolicy:
             raise SpaceIdInputError(f"{meta_path}: not valid JSON ({exc})") from None
         if not isinstance(metadata, dict) or metadata.get("format") != POLICY_FORMAT:
             raise SpaceIdInputError(f"{meta_path}: not a policy description of format {POLICY_FORMAT}")
+        env_id = metadata.get("env", SATELLITE_TASK.env_id)
+        if env_id not in TASKS:
+            raise SpaceIdInputError(f"{meta_path}: unknown env {env_id!r}; expected one of {sorted(TASKS)}")
         if robot is not None and metadata.get("robot") != robot:
-            raise SpaceIdInputError(f"{path}: policy trained for robot {metadata.get('robot')!r}, not {robot!r}")
+            raise SpaceIdInputError(f"{path}: policy trained for robot {metadata.get('robot')!r} ({env_id}), not {robot!r}")
         if params is not None and metadata.get("params") != params:
             raise SpaceIdInputError(f"{path}: policy trained for parameterisation {metadata.get('params')!r}, not {params!r}")
         algorithm = ALGORITHMS.get(str(metadata.get("algorithm")))
@@ -291,17 +315,19 @@ class ExcitationPolicy:
 
 class RandomTargets:
     """The policy's action space without the learning: uniform random targets every :data:`DECISION_PERIOD_S`,
-    followed like the policy's (:func:`rate_command`); a :class:`~spaceid_gym.datasets.FeedbackExcitation`.
+    followed like the policy's (:func:`~agents.excitation_task.target_rate_command`); a
+    :class:`~spaceid_gym.datasets.FeedbackExcitation` of either env.
 
     It tells what the learnt policy adds to its action space. Draws from ``numpy.random.default_rng(seed)``.
     """
 
     def __init__(self, seed: int) -> None:
         self.seed = seed
-        self._env: FreeFloatingIDEnv | None = None
+        self._env: Any = None
 
-    def start(self, env: FreeFloatingIDEnv) -> None:
-        self._env = env.unwrapped if isinstance(env.unwrapped, FreeFloatingIDEnv) else env
+    def start(self, env: gym.Env) -> None:
+        self._task = task_of_env(env)
+        self._env = env.unwrapped
         self._hold = max(1, round(DECISION_PERIOD_S / self._env.control_period_s))
         self._rng, self._step = np.random.default_rng(self.seed), 0
         self._target = np.zeros(self._env.robot.n_joints, dtype=np.float32)
@@ -312,34 +338,19 @@ class RandomTargets:
         if self._step % self._hold == 0:
             self._target = self._rng.uniform(-1.0, 1.0, size=self._target.shape).astype(np.float32)
         self._step += 1
-        return rate_command(self._target, observation[: self._env.robot.n_joints], self._env.robot)
+        return self._task.rate_command(self._target, observation[: self._env.robot.n_joints], self._env.robot)
 
 
-class _ProgressBar(BaseCallback):
-    """A tqdm progress bar over the training's timesteps (stable-baselines3's own needs ``rich``)."""
-
-    def __init__(self, total: int) -> None:
-        super().__init__()
-        self._total = total
-        self._bar: Any = None
-
-    def _on_training_start(self) -> None:
-        self._bar = tqdm(total=self._total, unit="step", desc="training", mininterval=2.0)
-
-    def _on_step(self) -> bool:
-        self._bar.update(self.training_env.num_envs)
-        return True
-
-    def _on_training_end(self) -> None:
-        self._bar.close()
-
-
-def make_vec_env(robot: str, n_envs: int, kind: str, attitude_weight: float, first_seed: int, n_seeds: int, seed: int) -> VecEnv:
-    """``n_envs`` :class:`ExcitationEnv` in a ``DummyVecEnv`` (one process) or ``SubprocVecEnv`` (one each)."""
+def make_vec_env(
+    robot: str, n_envs: int, kind: str, attitude_weight: float | None, first_seed: int, n_seeds: int, seed: int
+) -> VecEnv:
+    """``n_envs`` training wrappers of ``robot``'s task (:func:`task_for_robot`) in a ``DummyVecEnv`` (one process)
+    or ``SubprocVecEnv`` (one each); ``attitude_weight`` ``None``: the task's default."""
+    task = task_for_robot(robot)
 
     def factory(rank: int) -> Any:
         def make() -> gym.Env:
-            env = Monitor(ExcitationEnv(robot, attitude_weight=attitude_weight, first_seed=first_seed, n_seeds=n_seeds))
+            env = Monitor(task.make_env(robot, first_seed, n_seeds, attitude_weight))
             env.reset(seed=seed + rank)
             return env
 
@@ -355,44 +366,62 @@ def make_vec_env(robot: str, n_envs: int, kind: str, attitude_weight: float, fir
 
 def train_excitation(
     robot: str = "paper6",
-    params: str = "fuel",
-    timesteps: int = DEFAULT_TIMESTEPS,
+    params: str | None = None,
+    timesteps: int | None = None,
     out: str | Path | None = None,
     *,
     algorithm: str = "ppo",
     seed: int = 0,
     n_envs: int = 2,
     vec_env: str = "dummy",
-    attitude_weight: float = DEFAULT_ATTITUDE_WEIGHT,
+    attitude_weight: float | None = None,
     eval_episodes: int = 4,
     n_evaluations: int = 5,
     progress_bar: bool = True,
+    log_std_init: float | None = None,
 ) -> ExcitationPolicy:
-    """Train an excitation policy for ``robot`` (module docstring) and save it to ``out`` if given.
+    """Train an excitation policy for ``robot`` (module docstring; a shipped arm such as ``"ur5"``:
+    :mod:`agents.arm_policy`) and save it to ``out`` if given.
 
     Args:
-        robot: shipped robot name.
-        params: the parameterisation whose information is rewarded (``"fuel"``).
-        timesteps: agent decisions to train for (> 0).
+        robot: shipped robot or arm name.
+        params: the parameterisation whose information is rewarded (``"fuel"`` for a satellite, ``"base"`` for an
+            arm; ``None``: that).
+        timesteps: agent decisions to train for (> 0; ``None``: the task's default, :data:`DEFAULT_TIMESTEPS` for a
+            satellite, :data:`~agents.arm_policy.ARM_DEFAULT_TIMESTEPS` for an arm).
         out: the policy folder (with ``checkpoints/`` and ``eval/``); ``None`` keeps it in memory.
         algorithm: ``"ppo"`` (default) or ``"sac"``.
         seed: seed of the algorithm, the envs and their draws.
         n_envs: parallel envs.
-        vec_env: ``"dummy"`` (default: faster on 2 cores, see docs/results.md) or ``"subproc"``.
-        attitude_weight: nats per degree of peak base attitude excursion.
+        vec_env: ``"dummy"`` (default: faster on 2 cores for the satellite, see docs/results.md) or ``"subproc"``.
+        attitude_weight: nats per degree of peak base attitude excursion (satellites only; ``None``: 0.05).
         eval_episodes, n_evaluations: the evaluation callback's episodes per evaluation and evaluations per run.
         progress_bar: show a progress bar.
+        log_std_init: PPO's initial log std of its Gaussian actions (the training's exploration; the saved policy
+            acts with the mean); ``None``: the task's (0 for a satellite, -1 for an arm).
     """
+    task = task_for_robot(robot)
+    timesteps = task.default_timesteps if timesteps is None else timesteps
+    params = task.params[0] if params is None else params
     if isinstance(timesteps, bool) or not isinstance(timesteps, int) or timesteps <= 0:
         raise SpaceIdInputError(f"timesteps: expected a positive integer, got {timesteps!r}")
-    if params not in PARAMETERISATIONS:
-        raise SpaceIdInputError(f"params: the agent is trained for {list(PARAMETERISATIONS)}, got {params!r}")
+    if params not in task.params:
+        raise SpaceIdInputError(f"params: the agent for {robot!r} is trained for {list(task.params)}, got {params!r}")
     if algorithm not in ALGORITHMS:
         raise SpaceIdInputError(f"algorithm: expected one of {sorted(ALGORITHMS)}, got {algorithm!r}")
+    log_std_init = task.log_std_init if log_std_init is None else log_std_init
+    if not math.isfinite(log_std_init):
+        raise SpaceIdInputError(f"log_std_init: expected a finite number, got {log_std_init!r}")
     if isinstance(n_envs, bool) or not isinstance(n_envs, int) or not 1 <= n_envs <= 64:
         raise SpaceIdInputError(f"n_envs: expected an integer from 1 to 64, got {n_envs!r}")
-    check_attitude_weight(attitude_weight)
-    robot_name = load_robot(robot).name  # a clear error for an unknown robot before anything starts
+    if attitude_weight is not None:
+        check_attitude_weight(attitude_weight)
+    if task is SATELLITE_TASK:
+        robot_name = load_robot(robot).name  # a clear error for an unknown robot before anything starts
+        attitude_weight = DEFAULT_ATTITUDE_WEIGHT if attitude_weight is None else attitude_weight
+    else:
+        task.make_env(robot, 0, 1, attitude_weight)  # refuses an attitude weight for a fixed base
+        robot_name = robot
     started = time.perf_counter()
     torch.manual_seed(seed)
     torch.set_num_threads(1)  # small networks: threads only contend with the envs on 2 cores
@@ -410,7 +439,8 @@ def train_excitation(
         n_steps = max(8, min(2 * decisions, timesteps // n_envs))
         model: BaseAlgorithm = PPO(
             "MlpPolicy", train, n_steps=n_steps, batch_size=max(8, n_steps // 2), learning_rate=3e-4, gamma=0.99,
-            gae_lambda=0.95, n_epochs=10, seed=seed, device="cpu", verbose=0, policy_kwargs={"net_arch": [64, 64]},
+            gae_lambda=0.95, n_epochs=10, seed=seed, device="cpu", verbose=0,
+            policy_kwargs={"net_arch": [64, 64], "log_std_init": log_std_init},
         )  # fmt: skip
     else:
         model = SAC(
@@ -419,7 +449,7 @@ def train_excitation(
         )  # fmt: skip
     callbacks: list[BaseCallback] = []
     if progress_bar:
-        callbacks.append(_ProgressBar(timesteps))
+        callbacks.append(ProgressBar(timesteps))
     if out is not None:
         folder = Path(out)
         every = max(1, timesteps // (n_evaluations * n_envs))
@@ -438,12 +468,14 @@ def train_excitation(
     wall = time.perf_counter() - started
     metadata = {
         "format": POLICY_FORMAT,
+        "env": task.env_id,
         "robot": robot_name,
         "params": params,
         "algorithm": algorithm,
         "decision_period_s": DECISION_PERIOD_S,
-        "window_s": WINDOW_S,
+        "window_s": task.window_s,
         "attitude_weight_nats_per_deg": attitude_weight,
+        "log_std_init": log_std_init if algorithm == "ppo" else None,
         "observation_mean": train.obs_rms.mean.tolist(),
         "observation_var": train.obs_rms.var.tolist(),
         "observation_epsilon": float(train.epsilon),
@@ -453,7 +485,7 @@ def train_excitation(
         "vec_env": vec_env,
         "seed": seed,
         "train_seeds": [0, VALIDATION_FIRST_SEED],
-        "train_control_period_s": TRAIN_CONTROL_PERIOD_S,
+        "train_control_period_s": task.train_control_period_s,
         "training_wall_time_s": wall,
     }
     train.close()

@@ -68,7 +68,7 @@ def test_rate_command_follows_targets_inside_the_range() -> None:
 
 
 def test_bad_policy_inputs_name_what_is_wrong(policy_folder: Path, tmp_path: Path) -> None:
-    with pytest.raises(SpaceIdInputError, match="trained for robot 'quick3', not 'paper6'"):
+    with pytest.raises(SpaceIdInputError, match=r"trained for robot 'quick3' \(FreeFloatingID-v0\), not 'paper6'"):
         ExcitationPolicy.load(policy_folder, robot="paper6")
     with pytest.raises(SpaceIdInputError, match="trained for parameterisation 'fuel', not 'base'"):
         ExcitationPolicy.load(policy_folder, params="base")
