@@ -7,6 +7,8 @@ import pytest
 
 import estimators.problem as problem_module
 from estimators.least_squares import interior_start
+from estimators.models.slosh_dynamics import N_INPUTS, integrate_slosh
+from estimators.models.tangents import slosh_tangents
 from estimators.problem import IdentificationModel
 
 #: each case's effects and their unknowns, all switched on (a pendulum's rod off the base's axes, a scale matrix with
@@ -59,3 +61,34 @@ def test_analytic_jacobians_match_central_differences(short_fuel_episode, monkey
     # the measurement effects do not move the base, only the gyro's reading
     measurement = [i for i, name in enumerate(params.names) if name.startswith(("bias_", "scale_", "delay_"))]
     assert np.all(analytic["base_rate"][:, measurement] == 0.0)
+
+
+@pytest.mark.parametrize("rod", [False, True])
+def test_slosh_tangents_match_complex_steps_through_the_integration(rod: bool) -> None:
+    """The slosh's written-out tangents (every RK4 stage of the spring, the frame's terms and the rod's tension)
+    against the same integration run in complex numbers along each direction (the complex step: exact derivatives,
+    an independent reference), to 1e-10 of each output's scale; some directions move the forcing and the coupling,
+    the others only the oscillator and the rod, as a fit's do."""
+    rng = np.random.default_rng(7)
+    n_t, n_k, h = 400, 6, 1e-30
+    t_s = np.arange(n_t) * 0.05
+    phases = rng.uniform(0.0, 2.0 * np.pi, 6)
+    twist = 0.05 * np.sin(2.0 * np.pi * np.outer(t_s, [0.05, 0.11, 0.07, 0.13, 0.09, 0.17]) + phases)
+    d_twist = 0.01 * rng.standard_normal((n_k, n_t, 6)) * np.sin(2.0 * np.pi * 0.1 * t_s)[None, :, None]
+    coupling = np.eye(3) + 0.1 * rng.standard_normal((3, 3))
+    axis = rng.standard_normal(3)
+    inputs = np.concatenate(
+        ([0.3, -0.1, 0.2], [20.0, 2.0 * np.pi * 0.3, 0.05, 4.0], coupling.ravel(), axis / np.linalg.norm(axis))
+    )
+    d_inputs = 0.1 * rng.standard_normal((n_k, N_INPUTS))
+    d_twist[3:], d_inputs[3:, :4], d_inputs[3:, 7:16] = 0.0, 0.0, 0.0  # the oscillator's own unknowns
+    out, d_out, moved, d_moved = slosh_tangents(twist, d_twist, t_s, inputs, d_inputs, rod)
+    c_out, c_moved = np.zeros((n_t, 6), dtype=complex), np.zeros((n_t, 10), dtype=complex)
+    work = np.empty((2 * n_t + 9, 9), dtype=complex)
+    for q in range(n_k):
+        integrate_slosh(twist + 1j * h * d_twist[q], t_s, inputs + 1j * h * d_inputs[q], rod, c_out, c_moved, work)
+        for value, reference, d_value, d_reference in ((out, c_out, d_out[q], c_out), (moved, c_moved, d_moved[q], c_moved)):
+            np.testing.assert_allclose(value, reference.real, rtol=0.0, atol=1e-12 * np.abs(reference.real).max())
+            scale = np.abs(d_reference.imag / h).max()
+            assert scale > 0.0
+            np.testing.assert_allclose(d_value, d_reference.imag / h, rtol=0.0, atol=1e-10 * scale)

@@ -5,15 +5,15 @@ per-sample computations: the base twist from the composite's spatial inertia (:f
 solve ``M v = extra - h`` of :mod:`estimators.models.momentum_model`) and the slosh oscillator integrated along the
 log (:func:`slosh_tangents`, the RK4 of :class:`~estimators.models.mass_effects.Slosh`). Each kernel here computes
 the same values as the prediction and, alongside, their derivatives along ``K`` directions of the unknowns, given the
-derivatives of its inputs. A Jacobian then costs one pass over the log (per direction for the slosh) instead of the
-``2k`` of central differences.
+derivatives of its inputs. A Jacobian then costs one pass over the log instead of the ``2k`` of central differences.
 
 * twist: ``M v = -h`` (``h`` the arm's momentum less the extra momentum) gives ``M dv = -dh - dM v``, with ``dM v =
   [dm v_lin - dh_c x omega; dh_c x v_lin + dJ omega]`` for a change ``(dm, dh_c, dJ)`` of the composite's 10 parameters;
   the same closed-form solve as the prediction's.
-* slosh: the same integration (:func:`~estimators.models.slosh_dynamics.integrate_slosh`) in complex numbers, every
-  input stepped by ``i h`` times its derivative (the complex step: exact derivatives of the nonlinear pendulum, its
-  rod's tension included, without hand-written tangents of every RK4 stage).
+* slosh: RK4 of the oscillator and of its tangents, each stage's derivative written out (:func:`_slope_tangent`:
+  the spring, the rotating frame's terms, the pendulum rod's restoring force and tension); the tank's forcing and the
+  momentum and displaced parameters formed from the state, cheap stages, by complex steps. The test holds it to the
+  whole integration run in complex numbers to 1e-10.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from numba import njit
 
 from estimators.models.momentum_model import _add_product, composite_inverse, twist_from_inverse
 from estimators.models.slosh_dynamics import cross3 as _cross
-from estimators.models.slosh_dynamics import integrate_slosh
+from estimators.models.slosh_dynamics import frame_terms, slosh_outputs, slosh_slope, tank_forcing
 from spaceid_gym.arrays import FloatArray
 
 
@@ -116,14 +116,111 @@ def twist_tangents(
     return out[0], d_out
 
 
-#: the complex step of :func:`slosh_tangents`: ``f(x + i h d)`` has the imaginary part ``h f'(x) d`` to the last
-#: bit (no difference is taken, so no cancellation), whatever small ``h``
+#: the complex step of the slosh's cheap stages in :func:`slosh_tangents` (the tank's forcing, the momentum and
+#: displaced parameters from the state): ``f(x + i h d)`` has the imaginary part ``h f'(x) d`` to the last bit (no
+#: difference is taken, so no cancellation), whatever small ``h``
 COMPLEX_STEP = 1e-30
 
 
-#: :func:`~estimators.models.slosh_dynamics.integrate_slosh` compiled with fast math for the complex steps: without it
-#: every complex product checks for infinities and NaNs (C99 Annex G), which doubled the derivatives' time
-_integrate_slosh_fast = njit(cache=True, fastmath=True)(integrate_slosh.py_func)
+@njit(cache=True, inline="always")
+def _slope_tangent(
+    point: FloatArray,
+    d_point: FloatArray,
+    step: FloatArray,
+    d_step: FloatArray,
+    row: int,
+    inputs: FloatArray,
+    d_inputs: FloatArray,
+    coupling: FloatArray,
+    d_coupling: FloatArray,
+    axis: FloatArray,
+    rod: bool,
+    slopes: FloatArray,
+    d_slopes: FloatArray,
+    s: int,
+    work: FloatArray,
+    moves: FloatArray,
+) -> None:
+    """``slopes[s]`` = :func:`~estimators.models.slosh_dynamics.slosh_slope` at ``point`` (6,) for the forcing
+    ``step[row]`` (9,) and the inputs (N_INPUTS,; their ``coupling`` (3, 3) and ``axis`` (3,) given), and
+    ``d_slopes[:, s]`` its derivatives along K directions from those of ``point`` (K, 6), ``step`` (K, 3, 9), the
+    inputs (K, N_INPUTS) and the coupling (K, 3, 3): the slope's forward-mode derivative written out (the spring, the
+    frame's terms, the rod's restoring force and tension). ``work`` (8, 3) is scratch; indices, not views, in here.
+    ``moves[q]`` (K,) is false for a direction along which the forcing and the coupling do not change (the
+    oscillator's own frequency, damping and rod): their terms are skipped."""
+    omega_n, zeta, kappa = inputs[4], inputs[5], inputs[6]
+    stiff, damp = omega_n * omega_n, 2.0 * zeta * omega_n
+    slosh_slope(point, step, row, coupling, stiff, damp, axis, kappa, rod, slopes, s)
+    f, acc, n, cn, df, dacc, dn, dcn = work[0], work[1], work[2], work[3], work[4], work[5], work[6], work[7]
+    wx, wy, wz = step[row, 3], step[row, 4], step[row, 5]
+    w_x = _cross(wx, wy, wz, point[0], point[1], point[2])
+    ax = axis[0] * point[0] + axis[1] * point[1] + axis[2] * point[2]
+    for c in range(3):
+        spring = point[c] + ax * axis[c] + kappa * ax * point[c] if rod else point[c]
+        f[c] = -stiff * spring - damp * point[3 + c]
+    g = frame_terms(step, row, point)
+    for c in range(3):  # C f - b, before the rod's tension
+        acc[c] = coupling[c, 0] * f[0] + coupling[c, 1] * f[1] + coupling[c, 2] * f[2] - (step[row, c] + g[c])
+        n[c] = axis[c] + kappa * point[c]
+    for c in range(3):
+        cn[c] = coupling[c, 0] * n[0] + coupling[c, 1] * n[1] + coupling[c, 2] * n[2]
+    den = n[0] * cn[0] + n[1] * cn[1] + n[2] * cn[2]
+    vv = point[3] * point[3] + point[4] * point[4] + point[5] * point[5]
+    tension = (n[0] * acc[0] + n[1] * acc[1] + n[2] * acc[2] + kappa * vv) / den if rod else 0.0
+    for q in range(d_point.shape[0]):
+        dx0, dx1, dx2 = d_point[q, 0], d_point[q, 1], d_point[q, 2]
+        dv0, dv1, dv2 = d_point[q, 3], d_point[q, 4], d_point[q, 5]
+        d_omega_n, d_zeta, d_kappa = d_inputs[q, 4], d_inputs[q, 5], d_inputs[q, 6]
+        d_stiff, d_damp = 2.0 * omega_n * d_omega_n, 2.0 * (d_zeta * omega_n + zeta * d_omega_n)
+        da0, da1, da2 = d_inputs[q, 16], d_inputs[q, 17], d_inputs[q, 18]
+        d_ax = da0 * point[0] + da1 * point[1] + da2 * point[2] + axis[0] * dx0 + axis[1] * dx1 + axis[2] * dx2
+        for c in range(3):
+            dxc = d_point[q, c]
+            if rod:
+                spring = point[c] + ax * axis[c] + kappa * ax * point[c]
+                d_axis_c = d_inputs[q, 16 + c]
+                d_spring = dxc + d_ax * axis[c] + ax * d_axis_c + (d_kappa * ax + kappa * d_ax) * point[c] + kappa * ax * dxc
+            else:
+                spring, d_spring = point[c], dxc
+            df[c] = -d_stiff * spring - stiff * d_spring - d_damp * point[3 + c] - damp * d_point[q, 3 + c]
+        # d g = 2 (dw x x' + w x dx') + d(dw/dt) x x + dw/dt x dx + dw x (w x x) + w x (dw x x + w x dx)
+        e2 = _cross(wx, wy, wz, dv0, dv1, dv2)
+        e4 = _cross(step[row, 6], step[row, 7], step[row, 8], dx0, dx1, dx2)
+        inner = _cross(wx, wy, wz, dx0, dx1, dx2)
+        e6 = _cross(wx, wy, wz, inner[0], inner[1], inner[2])
+        for c in range(3):
+            dg = 2.0 * e2[c] + e4[c] + e6[c]
+            dacc[c] = coupling[c, 0] * df[0] + coupling[c, 1] * df[1] + coupling[c, 2] * df[2] - dg
+            d_slopes[q, s, c] = d_point[q, 3 + c]
+        if moves[q]:  # the forcing's and the coupling's own changes
+            dwx, dwy, dwz = d_step[q, row, 3], d_step[q, row, 4], d_step[q, row, 5]
+            e1 = _cross(dwx, dwy, dwz, point[3], point[4], point[5])
+            e3 = _cross(d_step[q, row, 6], d_step[q, row, 7], d_step[q, row, 8], point[0], point[1], point[2])
+            e5 = _cross(dwx, dwy, dwz, w_x[0], w_x[1], w_x[2])
+            inner = _cross(dwx, dwy, dwz, point[0], point[1], point[2])
+            e7 = _cross(wx, wy, wz, inner[0], inner[1], inner[2])
+            for c in range(3):
+                dacc[c] += (
+                    d_coupling[q, c, 0] * f[0] + d_coupling[q, c, 1] * f[1] + d_coupling[q, c, 2] * f[2]
+                    - (d_step[q, row, c] + 2.0 * e1[c] + e3[c] + e5[c] + e7[c])
+                )  # fmt: skip
+        for c in range(3):
+            d_slopes[q, s, 3 + c] = dacc[c]
+        if rod:
+            for c in range(3):
+                dn[c] = d_inputs[q, 16 + c] + d_kappa * point[c] + kappa * d_point[q, c]
+            d_num = d_kappa * vv + 2.0 * kappa * (point[3] * dv0 + point[4] * dv1 + point[5] * dv2)
+            d_den = 0.0
+            for c in range(3):
+                dcn[c] = coupling[c, 0] * dn[0] + coupling[c, 1] * dn[1] + coupling[c, 2] * dn[2]
+                if moves[q]:
+                    dcn[c] += d_coupling[q, c, 0] * n[0] + d_coupling[q, c, 1] * n[1] + d_coupling[q, c, 2] * n[2]
+                d_num += dn[c] * acc[c] + n[c] * dacc[c]
+            for c in range(3):
+                d_den += dn[c] * cn[c] + n[c] * dcn[c]
+            d_tension = (d_num - tension * d_den) / den
+            for c in range(3):
+                d_slopes[q, s, 3 + c] -= d_tension * cn[c] + tension * dcn[c]
 
 
 @njit(cache=True)
@@ -133,17 +230,65 @@ def slosh_tangents(
     """The slosh mass's relative momentum (T, 6) and displaced parameters (T, 10) of
     :func:`~estimators.models.slosh_dynamics.integrate_slosh` for one parameter set, and their derivatives (K, T, 6)
     and (K, T, 10) along K directions, from the rest's twist (T, 6) and its derivatives (K, T, 6) and the inputs
-    (:data:`~estimators.models.slosh_dynamics.N_INPUTS`,) and their derivatives (K, N_INPUTS): each direction is one
-    integration in complex numbers along :data:`COMPLEX_STEP`."""
+    (:data:`~estimators.models.slosh_dynamics.N_INPUTS`,) and their derivatives (K, N_INPUTS): RK4 of the oscillator
+    and of its tangents (:func:`_slope_tangent`), the forcing's and the outputs' derivatives by complex steps."""
     n_k, n_t = d_twist.shape[0], twist.shape[0]
+    h = COMPLEX_STEP
+    tank, mass, coupling, axis = inputs[0:3], inputs[3], inputs[7:16].reshape(3, 3), inputs[16:19]
+    d_coupling = np.ascontiguousarray(d_inputs[:, 7:16]).reshape(n_k, 3, 3)
+    work = np.empty((8, 3))
+    forcing, d_forcing = np.empty((n_t, 9)), np.empty((n_k, n_t, 9))
+    c_forcing = np.empty((n_t, 9), dtype=np.complex128)
+    for k in range(n_t):
+        tank_forcing(twist, t_s, tank, k, forcing)
+    moves = np.zeros(n_k, dtype=np.bool_)  # whether the forcing or the coupling changes along a direction
+    for q in range(n_k):
+        moves[q] = np.any(d_twist[q] != 0.0) or np.any(d_inputs[q, 0:3] != 0.0) or np.any(d_inputs[q, 7:16] != 0.0)
+        if not moves[q]:
+            d_forcing[q] = 0.0
+            continue
+        c_twist, c_tank = twist + 1j * h * d_twist[q], tank + 1j * h * d_inputs[q, 0:3]
+        for k in range(n_t):
+            tank_forcing(c_twist, t_s, c_tank, k, c_forcing)
+        d_forcing[q] = c_forcing.imag / h
+    state, stage, slopes, step = np.zeros(6), np.empty(6), np.empty((4, 6)), np.empty((3, 9))
+    d_state, d_stage = np.zeros((n_k, 6)), np.empty((n_k, 6))
+    d_slopes, d_step = np.empty((n_k, 4, 6)), np.empty((n_k, 3, 9))
+    states, d_states = np.zeros((n_t, 6)), np.zeros((n_k, n_t, 6))
+    for k in range(1, n_t):
+        dt = t_s[k] - t_s[k - 1]
+        for i in range(9):
+            step[0, i], step[2, i] = forcing[k - 1, i], forcing[k, i]
+            step[1, i] = 0.5 * (step[0, i] + step[2, i])
+            for q in range(n_k):
+                d_step[q, 0, i], d_step[q, 2, i] = d_forcing[q, k - 1, i], d_forcing[q, k, i]
+                d_step[q, 1, i] = 0.5 * (d_step[q, 0, i] + d_step[q, 2, i])
+        for s in range(4):  # RK4 stages: the step's start, its middle twice, its end
+            fraction = 0.0 if s == 0 else (1.0 if s == 3 else 0.5)
+            for i in range(6):
+                stage[i] = state[i] + fraction * dt * slopes[s - 1, i] if s > 0 else state[i]
+                for q in range(n_k):
+                    d_stage[q, i] = d_state[q, i] + fraction * dt * d_slopes[q, s - 1, i] if s > 0 else d_state[q, i]
+            row = 0 if s == 0 else (1 if s < 3 else 2)
+            _slope_tangent(
+                stage, d_stage, step, d_step, row, inputs, d_inputs, coupling, d_coupling, axis, rod, slopes, d_slopes, s, work,
+                moves,
+            )  # fmt: skip
+        for i in range(6):
+            state[i] += (dt / 6.0) * (slopes[0, i] + 2.0 * slopes[1, i] + 2.0 * slopes[2, i] + slopes[3, i])
+            states[k, i] = state[i]
+            for q in range(n_k):
+                d_state[q, i] += (dt / 6.0) * (
+                    d_slopes[q, 0, i] + 2.0 * d_slopes[q, 1, i] + 2.0 * d_slopes[q, 2, i] + d_slopes[q, 3, i]
+                )
+                d_states[q, k, i] = d_state[q, i]
     out, moved = np.zeros((n_t, 6)), np.zeros((n_t, 10))
-    integrate_slosh(twist, t_s, inputs, rod, out, moved, np.empty((2 * n_t + 9, 9)))
+    slosh_outputs(states, tank, mass, out, moved)
     d_out, d_moved = np.zeros((n_k, n_t, 6)), np.zeros((n_k, n_t, 10))
     c_out, c_moved = np.zeros((n_t, 6), dtype=np.complex128), np.zeros((n_t, 10), dtype=np.complex128)
-    c_work = np.empty((2 * n_t + 9, 9), dtype=np.complex128)
-    h = COMPLEX_STEP
     for q in range(n_k):
-        _integrate_slosh_fast(twist + 1j * h * d_twist[q], t_s, inputs + 1j * h * d_inputs[q], rod, c_out, c_moved, c_work)
+        c_states = states + 1j * h * d_states[q]
+        slosh_outputs(c_states, tank + 1j * h * d_inputs[q, 0:3], mass + 1j * h * d_inputs[q, 3], c_out, c_moved)
         d_out[q] = c_out.imag / h
         d_moved[q] = c_moved.imag / h
     return out, d_out, moved, d_moved
