@@ -22,8 +22,9 @@ The mass ``m_s`` sits at the tank point ``r`` at rest; ``x`` is its displacement
   ``t = (n.C (f_s + f_d) - n.(a_tank + g) + kappa |x'|^2) / n.C n``.
 
 Integrated with classical RK4 at the log's sample period, starting at rest, the forcing ``a_tank`` and the base's
-rates linear between samples. :func:`slosh_slope` is written for real and complex numbers alike: the forward-mode
-derivatives (:func:`~estimators.models.tangents.slosh_tangents`) take it along complex steps.
+rates linear between samples. Every kernel here is written for real and complex numbers alike: the forward-mode
+derivatives (:func:`~estimators.models.tangents.slosh_tangents`) take the cheap ones along complex steps, and their
+test runs the whole integration in complex numbers as the exact reference.
 """
 
 from __future__ import annotations
