@@ -230,13 +230,13 @@ class Slosh(EffectTerm):
         for i, field in enumerate(Slosh.names):
             if field in hidden:
                 theta[i] = float(hidden[field])
-        if self.model == "pendulum" and hidden.get("slosh_axis") is not None:
+        if self.has_rod and hidden.get("slosh_axis") is not None:
             axis = np.ravel(np.asarray(hidden["slosh_axis"], dtype=float))
             if axis.size != 3 or not np.linalg.norm(axis) > 0.0:
                 raise SpaceIdInputError(f"hidden_effects: slosh_axis expected a non-zero 3-vector, got {hidden['slosh_axis']!r}")
             axis = axis / np.linalg.norm(axis)
             theta[3:5] = math.atan2(axis[1], axis[0]), math.asin(float(np.clip(axis[2], -1.0, 1.0)))
-        if self.model == "pendulum" and hidden.get("slosh_length_m") is not None:
+        if self.has_rod and hidden.get("slosh_length_m") is not None:
             length_m = float(hidden["slosh_length_m"])
             if not length_m > 0.0:
                 raise SpaceIdInputError(f"hidden_effects: slosh_length_m expected > 0 m, got {hidden['slosh_length_m']!r}")
@@ -246,7 +246,7 @@ class Slosh(EffectTerm):
     def rod(self, theta: FloatArray) -> tuple[FloatArray, FloatArray]:
         """The pendulum's rod for ``theta`` (P, k_e): its unit axis at rest ``a = [cos el cos az, cos el sin az, sin
         el]`` (P, 3), base axes, and curvature (P,) 1/m; for the spring (no rod) ``+z`` and 0, unused."""
-        if self.model == "spring":
+        if not self.has_rod:
             return np.tile([0.0, 0.0, 1.0], (len(theta), 1)), np.zeros(len(theta))
         return rod_axis(theta[:, 3], theta[:, 4]), np.array(theta[:, 5], dtype=float)
 
@@ -271,7 +271,7 @@ class Slosh(EffectTerm):
         """:data:`GRID_FREQUENCIES_HZ` x :data:`GRID_MASS_FRACTIONS` of the liquid left for ``theta_base`` (or of the
         usable fuel), damping 0.05: candidates to score in one batched evaluation before the local fits."""
         liquid = self.upper[0] if theta_base is None else float(self.liquid_of(np.atleast_2d(theta_base))[0])
-        axes = tuple((*axis, 0.0) for axis in self.GRID_AXES) if self.model == "pendulum" else ((),)
+        axes = tuple((*axis, 0.0) for axis in self.GRID_AXES) if self.has_rod else ((),)
         return [
             np.array([fraction * liquid, f, 0.05, *axis])
             for f in self.GRID_FREQUENCIES_HZ
@@ -283,7 +283,7 @@ class Slosh(EffectTerm):
         """The pendulum's candidates (6,) with the mass, frequency and damping of ``fitted`` (the first three values: a
         fit of the other slosh model, whose small lateral motions are the same) and a straight rod along each of
         :data:`FINE_AXES`; none for the spring."""
-        if self.model != "pendulum":
+        if not self.has_rod:
             return []
         return [np.array([*np.asarray(fitted, dtype=float)[:3], *axis, 0.0]) for axis in self.FINE_AXES]
 
@@ -320,7 +320,7 @@ class Slosh(EffectTerm):
             "slosh_frequency_hz": float(theta[1]),
             "slosh_damping_ratio": float(theta[2]),
         }
-        if self.model == "pendulum":  # numbers only (the estimate's std differentiates them); the model is in the spec
+        if self.has_rod:  # numbers only (the estimate's std differentiates them); the model is in the spec
             out["slosh_axis"] = rod_axis(theta[3:4], theta[4:5])[0].tolist()
             out["slosh_rod_curvature_per_m"] = float(theta[5])
         return out

@@ -23,7 +23,7 @@ from numba import njit
 
 from estimators.models.momentum_model import _add_product, composite_inverse, twist_from_inverse
 from estimators.models.slosh_dynamics import cross3 as _cross
-from estimators.models.slosh_dynamics import frame_terms, slosh_outputs, slosh_slope, tank_forcing
+from estimators.models.slosh_dynamics import frame_terms, slosh_outputs, tank_forcing
 from spaceid_gym.arrays import FloatArray
 
 
@@ -141,7 +141,7 @@ def _slope_tangent(
     work: FloatArray,
     moves: FloatArray,
 ) -> None:
-    """``slopes[s]`` = :func:`~estimators.models.slosh_dynamics.slosh_slope` at ``point`` (6,) for the forcing
+    """``slopes[s]`` = the slope of :func:`~estimators.models.slosh_dynamics.slosh_slope` at ``point`` (6,) for the forcing
     ``step[row]`` (9,) and the inputs (N_INPUTS,; their ``coupling`` (3, 3) and ``axis`` (3,) given), and
     ``d_slopes[:, s]`` its derivatives along K directions from those of ``point`` (K, 6), ``step`` (K, 3, 9), the
     inputs (K, N_INPUTS) and the coupling (K, 3, 3): the slope's forward-mode derivative written out (the spring, the
@@ -150,7 +150,6 @@ def _slope_tangent(
     oscillator's own frequency, damping and rod): their terms are skipped."""
     omega_n, zeta, kappa = inputs[4], inputs[5], inputs[6]
     stiff, damp = omega_n * omega_n, 2.0 * zeta * omega_n
-    slosh_slope(point, step, row, coupling, stiff, damp, axis, kappa, rod, slopes, s)
     f, acc, n, cn, df, dacc, dn, dcn = work[0], work[1], work[2], work[3], work[4], work[5], work[6], work[7]
     wx, wy, wz = step[row, 3], step[row, 4], step[row, 5]
     w_x = _cross(wx, wy, wz, point[0], point[1], point[2])
@@ -167,6 +166,9 @@ def _slope_tangent(
     den = n[0] * cn[0] + n[1] * cn[1] + n[2] * cn[2]
     vv = point[3] * point[3] + point[4] * point[4] + point[5] * point[5]
     tension = (n[0] * acc[0] + n[1] * acc[1] + n[2] * acc[2] + kappa * vv) / den if rod else 0.0
+    for c in range(3):  # the slope itself, as slosh_slope has it (the test holds the two to the same values)
+        slopes[s, c] = point[3 + c]
+        slopes[s, 3 + c] = acc[c] - tension * cn[c]
     for q in range(d_point.shape[0]):
         dx0, dx1, dx2 = d_point[q, 0], d_point[q, 1], d_point[q, 2]
         dv0, dv1, dv2 = d_point[q, 3], d_point[q, 4], d_point[q, 5]
