@@ -15,6 +15,7 @@ import math
 import numpy as np
 import pytest
 from scipy.linalg import solve_banded
+from scipy.optimize import minimize
 from scipy.stats import chi2
 
 from estimators.attitude_channel import (
@@ -27,9 +28,13 @@ from estimators.attitude_channel import (
     truncation_shape,
 )
 from estimators.attitude_noise import (
+    SIMPLEX_F_TOLERANCE,
+    SIMPLEX_MAX_EVALUATIONS,
+    SIMPLEX_X_TOLERANCE,
     AttitudeNoise,
     _filtered_factor,
     _negative_log_likelihood,
+    _simplex_minimum,
     _whitened_terms,
     fit_attitude_noise,
 )
@@ -253,6 +258,31 @@ def test_the_error_models_fit_survives_a_simplex_that_wanders_far() -> None:
     assert np.isfinite(_negative_log_likelihood(np.array([-800.0, -1e5]), d))
     noise = fit_attitude_noise(np.zeros((200, 3)))
     assert max(noise.white_std_rad) <= 1e-9 and max(noise.walk_std_rad) <= 1e-9
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_compiled_simplex_reaches_scipys_nelder_mead_minimum(seed: int) -> None:
+    """The error model's compiled simplex against scipy's Nelder-Mead (the same method, in Python) on the likelihood
+    of residuals of each kind (white + random walk, a smooth wander, white alone), from the fit's three kinds of start:
+    the same minimum to the tolerance on the value both stop at."""
+    rng = np.random.default_rng(seed)
+    n = 3000
+    steps = np.zeros(n)
+    innovations = [1e-7, 2e-6, 3e-7, 0.0][seed] * rng.standard_normal(n)
+    for k in range(1, n):
+        steps[k] = [0.0, 0.0, 0.9, 0.0][seed] * steps[k - 1] + innovations[k]
+    d = np.diff(1e-6 * rng.standard_normal(n) + np.cumsum(steps))
+    for x0 in ([3.0, -2.9], [0.0, 0.0], [-2.0, 3.0]):
+        x, value, _ = _simplex_minimum(np.array(x0), d, SIMPLEX_X_TOLERANCE, SIMPLEX_F_TOLERANCE, SIMPLEX_MAX_EVALUATIONS)
+        reference = minimize(
+            _negative_log_likelihood,
+            np.array(x0),
+            args=(d,),
+            method="Nelder-Mead",
+            options={"xatol": SIMPLEX_X_TOLERANCE, "fatol": SIMPLEX_F_TOLERANCE, "maxfev": SIMPLEX_MAX_EVALUATIONS},
+        )
+        assert abs(value - reference.fun) <= SIMPLEX_F_TOLERANCE, (x0, x, reference.x)
+        assert value == pytest.approx(_negative_log_likelihood(x, d), abs=0.0)
 
 
 @pytest.mark.parametrize(("white_var", "walk_var", "phi"), [(0.5, 0.5, 0.5), (0.9, 0.1, 0.999), (0.01, 0.99, 1e-6)])

@@ -38,6 +38,19 @@ def test_parameter_frame_change_matches_pinocchio() -> None:
     np.testing.assert_allclose(transform_params10(PAYLOAD.to_params10(), rot, trans), expected, rtol=0, atol=1e-12)
 
 
+def test_parameter_frame_change_of_a_batch_of_frames_matches_pinocchio_frame_by_frame() -> None:
+    rng = np.random.default_rng(7)
+    rots = np.stack([pin.utils.rpyToMatrix(*rng.uniform(-3.0, 3.0, 3)) for _ in range(5)])
+    trans = rng.uniform(-1.0, 1.0, (5, 3))
+    body = pin.Inertia(PAYLOAD.mass_kg, PAYLOAD.com_m, PAYLOAD.inertia_com_kgm2)
+    expected = np.stack([pin.SE3(r, t).act(body).toDynamicParameters() for r, t in zip(rots, trans, strict=True)])
+    np.testing.assert_allclose(transform_params10(PAYLOAD.to_params10(), rots, trans), expected, rtol=0, atol=1e-12)
+    # frames (5, 1) against two bodies (2,): one row per frame and body
+    bodies = np.stack([PAYLOAD.to_params10(), 2.0 * PAYLOAD.to_params10()])
+    both = transform_params10(bodies, rots[:, None], trans[:, None])
+    np.testing.assert_allclose(both, np.stack([expected, 2.0 * expected], axis=1), rtol=0, atol=1e-12)
+
+
 def test_payload_model_reproduces_a_simulated_log_with_a_payload(paper6: Robot) -> None:
     log = _noise_free_log(paper6.with_payload(PAYLOAD))
     problem = IdentificationModel(paper6, "payload").problem(log)

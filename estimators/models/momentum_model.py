@@ -218,8 +218,8 @@ class MomentumModel:
         """Per-sample ``A_t`` (T, 10, 10) and ``G_t`` (T, 6, 10) of the module docstring (computed once)."""
         if self._payload_terms is None:
             rot, pos, twist = self._last_link_motion()
-            eye = np.eye(10)
-            to_base = np.stack([transform_params10(eye, r, p).T for r, p in zip(rot, pos, strict=True)])
+            # row k of each sample's map: the k-th basis vector's parameters in the base frame; transposed: A_t
+            to_base = np.swapaxes(transform_params10(np.eye(10), rot[:, None], pos[:, None]), 1, 2)
             # payload momentum in the last link's frame is B(pi) v_link; express it at the base origin
             local = np.einsum("kab,tb->tak", SPATIAL_INERTIA_BASIS, twist)  # (T, 6, 10)
             force_to_base = np.zeros((len(rot), 6, 6))

@@ -148,7 +148,8 @@ def transform_params10(params10: FloatArray, rot: FloatArray, trans_m: FloatArra
     """Express a body's 10 inertial parameters in a parent frame; batched over (..., 10).
 
     The body's parameters are given about the origin of a child frame ``C`` with axes of ``C``;
-    ``C`` has orientation ``rot`` (3, 3) and origin ``trans_m`` (3,) in the parent frame ``P``.
+    ``C`` has orientation ``rot`` (..., 3, 3) and origin ``trans_m`` (..., 3) in the parent frame ``P``
+    (one frame, or a batch that broadcasts against ``params10``'s leading axes).
     With ``h = m c`` and ``J`` the inertia about ``C``'s origin: ``h' = R h + m p`` and
     ``J' = R J R^T + m S(p) + 2 (p . R h) E - p (R h)^T - (R h) p^T``. The map is linear in the
     parameters (so it also maps differences and basis vectors).
@@ -157,16 +158,13 @@ def transform_params10(params10: FloatArray, rot: FloatArray, trans_m: FloatArra
     r = np.asarray(rot, dtype=float)
     t = np.asarray(trans_m, dtype=float)
     mass = p[..., 0]
-    rh = p[..., 1:4] @ r.T
-    j_rot = r @ inertia_matrix_from_entries(p[..., 4:10]) @ r.T
-    p_dot_rh = rh @ t
-    outer = t[:, None] * rh[..., None, :]
-    inertia = (
-        j_rot
-        + mass[..., None, None] * point_mass_inertia(t)
-        + 2.0 * p_dot_rh[..., None, None] * np.eye(3)
-        - outer
-        - np.swapaxes(outer, -1, -2)
-    )
+    rh = np.einsum("...ij,...j->...i", r, p[..., 1:4])
+    j_rot = r @ inertia_matrix_from_entries(p[..., 4:10]) @ np.swapaxes(r, -1, -2)
+    p_dot_rh = np.sum(rh * t, axis=-1)
+    outer = t[..., :, None] * rh[..., None, :]
+    eye = np.eye(3)
+    point = np.sum(t * t, axis=-1)[..., None, None] * eye - t[..., :, None] * t[..., None, :]
+    inertia = j_rot + mass[..., None, None] * point + 2.0 * p_dot_rh[..., None, None] * eye - outer - np.swapaxes(outer, -1, -2)
     entries = np.stack([inertia[..., i, j] for i, j in _INERTIA_ENTRIES], axis=-1)
-    return np.concatenate((mass[..., None], rh + mass[..., None] * t, entries), axis=-1)
+    masses = np.broadcast_to(mass[..., None], (*entries.shape[:-1], 1))
+    return np.concatenate((masses, rh + mass[..., None] * t, entries), axis=-1)
