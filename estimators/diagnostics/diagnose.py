@@ -407,6 +407,11 @@ def _refit_nested_from_containers(
             )
 
 
+#: where :func:`_fit_candidate` scans a term that cannot act at the baseline: shares of the way from the baseline to the
+#: interior start
+SCAN_SHARES_TOWARD_INTERIOR = (1.0 / 3.0, 2.0 / 3.0, 1.0)
+
+
 def _fit_candidate(
     model: IdentificationModel,
     log: MeasurementLog,
@@ -428,6 +433,12 @@ def _fit_candidate(
     k_base = params.base.n_params
     problem = extended.problem(log)
     grid = [np.concatenate((baseline.theta, s)) for s in term.grid(baseline.theta[:k_base])]
+    if not grid:
+        # the term cannot act at the baseline (a missing slosh can drag it to the fuel bound: no liquid left): the scan
+        # at points on the way from the baseline to the interior start instead
+        for share in SCAN_SHARES_TOWARD_INTERIOR:
+            point = baseline.theta + share * (restart - baseline.theta)
+            grid += [np.concatenate((point, s)) for s in term.grid(point[:k_base])]
     n0 = len(baseline.theta)  # the model's own unknowns (base and effects already in it), then the candidate's
     grid += [np.concatenate((v.theta[:n0], s)) for v in other_variants for s in term.grid_from_variant(v.theta[n0:])]
     extended_channel = None if channel is None else AttitudeChannel.of(extended, log, channel.coupling)

@@ -121,7 +121,9 @@ class EffectTerm(ABC):
 
     def grid(self, theta_base: FloatArray | None = None) -> list[FloatArray]:
         """Candidate starts (k_e,) to score in one batched evaluation, the best of which start the local fits;
-        by default :meth:`starts` (a term whose cost is multimodal offers a scan)."""
+        by default :meth:`starts` (a term whose cost is multimodal offers a scan). Empty where the term cannot act
+        with the base parameters ``theta_base`` (a slosh where they leave no liquid): the scan is then made at other
+        base parameters."""
         return self.starts(theta_base)
 
     def grid_from_variant(self, fitted: FloatArray) -> list[FloatArray]:

@@ -179,6 +179,9 @@ class Slosh(EffectTerm):
     #: the scan of :meth:`grid`: frequencies (Hz, log-spaced over the search range) and sloshing fractions of the liquid
     GRID_FREQUENCIES_HZ = tuple(float(f) for f in np.geomspace(0.02, 2.0, 19))
     GRID_MASS_FRACTIONS = (0.05, 0.2, 0.5)
+    #: the liquid left, as a fraction of the usable fuel, below which :meth:`grid` scans no masses (they would be below
+    #: 0.05 % of the usable fuel)
+    GRID_MIN_LIQUID_FRACTION = 0.01
     #: the pendulum's rod directions of the scan (azimuth, elevation; rad): the base's z, x and y axes and the four
     #: diagonals of its octants (a direction and its opposite are one rod)
     GRID_AXES = (
@@ -269,8 +272,12 @@ class Slosh(EffectTerm):
 
     def grid(self, theta_base: FloatArray | None = None) -> list[FloatArray]:
         """:data:`GRID_FREQUENCIES_HZ` x :data:`GRID_MASS_FRACTIONS` of the liquid left for ``theta_base`` (or of the
-        usable fuel), damping 0.05: candidates to score in one batched evaluation before the local fits."""
+        usable fuel), damping 0.05: candidates to score in one batched evaluation before the local fits. None where
+        ``theta_base`` leaves less than :data:`GRID_MIN_LIQUID_FRACTION` of the usable fuel: every candidate there
+        would be all but the fit without slosh (a missing slosh can drag a fit to the fuel bound, held-out 9500)."""
         liquid = self.upper[0] if theta_base is None else float(self.liquid_of(np.atleast_2d(theta_base))[0])
+        if liquid < self.GRID_MIN_LIQUID_FRACTION * self.upper[0]:
+            return []
         axes = tuple((*axis, 0.0) for axis in self.GRID_AXES) if self.has_rod else ((),)
         return [
             np.array([fraction * liquid, f, 0.05, *axis])
