@@ -27,7 +27,7 @@ from scipy.optimize import brentq
 from scipy.stats import chi2, ncx2
 
 from estimators.diagnostics import power
-from estimators.diagnostics.diagnose import DEFAULT_CANDIDATES, diagnose
+from estimators.diagnostics.diagnose import diagnose
 from estimators.diagnostics.suite import SUITE_EFFECTS, parse_magnitudes, simulate_case
 from estimators.problem import IdentificationModel
 from spaceid_gym.errors import SpaceIdInputError
@@ -61,18 +61,18 @@ def main() -> None:
         parser.error(str(exc))
     size = magnitude.get(args.effect)
     dof = power.effect_dof(IdentificationModel("paper6", "fuel"), args.effect)
-    threshold = chi2.isf(ALPHA / len(DEFAULT_CANDIDATES), dof)
+    threshold = chi2.isf(ALPHA / power.N_TESTS, dof)
     powers, lambdas = [], []
     for seed in seeds:
         lam = non_centrality(args.effect, seed, magnitude=size)
         lambdas.append(lam)
-        powers.append(power.power_of(lam, dof, ALPHA, len(DEFAULT_CANDIDATES)))
+        powers.append(power.power_of(lam, dof, ALPHA, power.N_TESTS))
         print(f"seed {seed:3d}: lambda {lam:9.1f}  power {powers[-1]:.2f}", flush=True)
     needed = brentq(lambda x: ncx2.sf(threshold, dof, x) - 0.9, 1e-3, 1e4)
     print(
         f"{args.effect} (magnitude {'default' if size is None else f'{size:g}'}): mean expected power of the test {np.mean(powers):.2f} over {len(powers)} logs; median lambda "
         f"{np.median(lambdas):.1f} against the threshold {threshold:.1f} "
-        f"({dof} dof, alpha {ALPHA} / {len(DEFAULT_CANDIDATES)} candidates); 90 % power needs lambda {needed:.1f}"
+        f"({dof} dof, alpha {ALPHA} / {power.N_TESTS} tests); 90 % power needs lambda {needed:.1f}"
     )
 
 

@@ -4,6 +4,7 @@ the matrix's bookkeeping and its command."""
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -14,12 +15,16 @@ import pytest
 from suite_rows import diagnosed_row
 
 from estimators.diagnostics import matrix, suite
-from estimators.diagnostics.power import expected_power, power_of
+from estimators.diagnostics.power import effect_dof, expected_power, non_centrality, power_of
+from estimators.least_squares import LevenbergMarquardt
+from estimators.models.mass_effects import Slosh
 from estimators.problem import IdentificationModel
 from spaceid_gym.cli import main
+from spaceid_gym.datasets import simulate_episode
 from spaceid_gym.effects.draws import DEFAULT_MAGNITUDES, remaining_liquid_kg
+from spaceid_gym.effects.settings import HiddenEffects
 from spaceid_gym.errors import SpaceIdInputError
-from spaceid_gym.excitation import SmoothRandomExcitation
+from spaceid_gym.excitation import FourierExcitation, SmoothRandomExcitation
 from spaceid_gym.robots import load_robot
 from spaceid_gym.sim.sensors import SensorModel
 from spaceid_gym.variations import (
@@ -141,6 +146,45 @@ def test_the_expected_power_rises_with_the_effect_and_is_alpha_without_it() -> N
         model = IdentificationModel(env.robot, "fuel")
         powers.append(expected_power(model, "gyro_bias", env.measurement_log(), truth_of(env)))
     assert powers[0] < powers[1] and powers[1] > 0.99
+
+
+def test_the_expected_power_of_a_pendulum_slosh_is_that_of_the_pendulum() -> None:
+    """On a noise-free log of a 2 kg pendulum slosh (0.2 m rod, tilted), the non-centrality is the chi-square left by
+    the best fit without the effect (at a gyro std of 1e-5 rad/s; small enough an effect for the local approximation):
+    the pendulum's term gives it to 5 %. Before, the pendulum's power was that of a spring-mass of the same size, 10
+    times too large here (the spring's mass moves along the rod too)."""
+    paper6 = load_robot("paper6")
+    fuel = np.array([40.0, 0.2, -0.1, 0.1])  # mdf kg, tank m
+    rod = np.array([0.3, -0.2, 1.0]) / np.linalg.norm([0.3, -0.2, 1.0])
+    hidden = HiddenEffects(
+        slosh_mass_kg=2.0,
+        slosh_frequency_hz=0.3,
+        slosh_damping_ratio=0.05,
+        slosh_model="pendulum",
+        slosh_length_m=0.2,
+        slosh_axis=tuple(rod),
+    )
+    excitation = FourierExcitation(paper6.n_joints, seed=1, base_frequency_hz=0.05, n_harmonics=10)
+    env = simulate_episode(
+        paper6, 20.0, fuel[0], fuel[1:], excitation, seed=1, sensors=SensorModel.noise_free(), hidden_effects=hidden
+    )
+    log = dataclasses.replace(env.measurement_log(), quat_base_to_inertial_wxyz=None)
+    sigma = 1e-5
+    truth = {
+        "fuel_consumed_kg": fuel[0],
+        "tank_position_m": tuple(fuel[1:]),
+        "hidden_effects": hidden.to_dict(),
+        "noise": {"gyro_std_rad_s": sigma},
+    }
+    model = IdentificationModel(paper6, "fuel")
+    problem = model.problem(log)
+    residual = problem.residuals(LevenbergMarquardt(max_iterations=100).polish(problem, fuel).theta, count=False)
+    exact = float(residual @ residual) / sigma**2
+    assert exact > 10.0  # an effect the test can see
+    assert non_centrality(model, "slosh", log, truth) == pytest.approx(exact, rel=0.05)
+    spring = {**truth, "hidden_effects": {k: v for k, v in truth["hidden_effects"].items() if k in Slosh.names}}
+    assert non_centrality(model, "slosh", log, spring) > 3.0 * exact
+    assert effect_dof(model, "slosh", truth) == 6 and effect_dof(model, "slosh", spring) == 3
 
 
 def _matrix_row(effect: str, seed: int, duration_s: float = 60.0, fixed: dict[str, Any] | None = None) -> dict[str, Any]:
