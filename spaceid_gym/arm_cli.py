@@ -36,7 +36,7 @@ from estimators.arm.model import ArmIdentificationModel
 from estimators.diagnostics.plots import plot_overlay
 from estimators.evaluation import estimator_from_spec, parse_estimator_specs
 from spaceid_gym.arm.arm_robot import load_arm
-from spaceid_gym.arm.friction import FRICTION_TERMS
+from spaceid_gym.arm.friction import FRICTION_TERMS, FrictionModel
 from spaceid_gym.arm.joint_sensors import ArmSensorModel
 from spaceid_gym.arm.simulated_arm_datasets import simulate_arm_dataset  # the optimiser and simulator load only when used
 from spaceid_gym.arm.torque_simulator import INTERNAL_RATE_HZ, SAMPLE_RATE_HZ
@@ -46,6 +46,8 @@ from spaceid_gym.files import write_json_atomic, write_text_atomic
 from spaceid_gym.limits import max_jobs
 
 _EFFORTS = {"torque": "torque_Nm", "current": "current_A"}
+#: the friction model's default velocities (those of ``--stribeck-velocity`` and ``--coulomb-smoothing``)
+_DEFAULT_FRICTION = FrictionModel()
 
 
 def add_arm_simulate_arguments(parser: argparse.ArgumentParser) -> None:
@@ -130,6 +132,19 @@ def _add_data_arguments(parser: argparse.ArgumentParser) -> None:
         default="coulomb,viscous",
         help=f"friction terms of the model, comma-separated from {','.join(FRICTION_TERMS)}, or 'none' (default coulomb,viscous)",
     )
+    parser.add_argument(
+        "--stribeck-velocity",
+        type=float,
+        default=_DEFAULT_FRICTION.stribeck_velocity_rad_s,
+        help=f"Stribeck velocity vs of the 'stribeck' term, rad/s, fixed (default {_DEFAULT_FRICTION.stribeck_velocity_rad_s:g})",
+    )
+    parser.add_argument(
+        "--coulomb-smoothing",
+        type=float,
+        default=_DEFAULT_FRICTION.coulomb_smoothing_rad_s,
+        help=f"width v_eps of the smooth sign tanh(dq / v_eps) of the friction terms, rad/s; 0 = the exact sign "
+        f"(default {_DEFAULT_FRICTION.coulomb_smoothing_rad_s:g})",
+    )
     parser.add_argument("--armature", action="store_true", help="add a rotor inertia per joint to the model")
     parser.add_argument("--cutoff", type=float, default=4.0, help="zero-phase low-pass cutoff, Hz (default 4)")
     parser.add_argument("--decimate", type=int, default=5, help="keep every k-th sample after filtering (default 5)")
@@ -204,15 +219,26 @@ def _movements(args: argparse.Namespace, names: list[str] | None) -> tuple[Any, 
     """The signal chain, the raw logs and their processed noise floors (simulated data) from the arguments."""
     if args.decimate < 1:
         raise SpaceIdInputError(f"--decimate: expected an integer >= 1, got {args.decimate}")
+    friction_model(args, ())  # the velocity options are checked before the logs load
     preparation = Preparation(cutoff_hz=args.cutoff, decimate_factor=args.decimate)
     raw = load_movements(args.data, names)
     floors = {name: processed_noise_floor(preparation, simulated_noise_std(args.data, name), raw[name]) for name in raw}
     return preparation, raw, floors
 
 
+def friction_model(args: argparse.Namespace, terms: tuple[str, ...]) -> FrictionModel:
+    """The friction ``terms`` with the velocities of ``--stribeck-velocity`` and ``--coulomb-smoothing``."""
+    stribeck, smoothing = args.stribeck_velocity, args.coulomb_smoothing
+    if not (np.isfinite(stribeck) and stribeck > 0):
+        raise SpaceIdInputError(f"--stribeck-velocity: expected a velocity > 0 rad/s, got {stribeck!r}")
+    if not (np.isfinite(smoothing) and smoothing >= 0):
+        raise SpaceIdInputError(f"--coulomb-smoothing: expected a width >= 0 rad/s (0 = the exact sign), got {smoothing!r}")
+    return FrictionModel(terms, coulomb_smoothing_rad_s=smoothing, stribeck_velocity_rad_s=stribeck)
+
+
 def _model(args: argparse.Namespace, friction: tuple[str, ...] | None = None) -> Any:
     terms = parse_friction(args.friction) if friction is None else friction
-    return ArmIdentificationModel.build(load_arm(args.robot), terms, args.armature)
+    return ArmIdentificationModel.build(load_arm(args.robot), friction_model(args, terms), args.armature)
 
 
 def _error_line(error: Any) -> str:
@@ -320,7 +346,7 @@ def run_arm_cross_validate(args: argparse.Namespace) -> None:
     implied_gains = None
     if getattr(args, "compare_ur_model", False):
         terms = parse_friction(args.ur_model_friction)
-        controller = load_controller_rows(args.data, logs, preparation, terms)
+        controller = load_controller_rows(args.data, logs, preparation, friction_model(args, terms))
         controller_rows, coefficients = controller_model_leave_one_out(controller, floors, controller_estimator_label(terms))
         rows += controller_rows
         implied_gains = {name: (1.0 / c[:, 0]).tolist() for name, c in coefficients.items()}
@@ -333,6 +359,10 @@ def run_arm_cross_validate(args: argparse.Namespace) -> None:
         args.out / "rows.json",
         {
             "models": {k: m.describe() for k, m in models.items()},
+            "friction_velocities_rad_s": {
+                "coulomb_smoothing": args.coulomb_smoothing,
+                "stribeck": args.stribeck_velocity,
+            },
             "summary": summary,
             "rows": [r.to_dict() for r in rows],
             "wall_time_s": time.perf_counter() - start,

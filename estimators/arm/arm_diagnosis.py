@@ -31,6 +31,7 @@ pushed the arm (``WDist``, ``w_disturbance``).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
@@ -85,7 +86,7 @@ def _with_terms(model: ArmIdentificationModel, terms: Iterable[str], armature: b
         wanted.discard("coulomb")
     if wanted == present and (not armature or model.regressor.armature):
         return None
-    friction = tuple(t for t in FRICTION_TERMS if t in wanted)
+    friction = dataclasses.replace(model.regressor.friction, terms=tuple(t for t in FRICTION_TERMS if t in wanted))
     return ArmIdentificationModel.build(model.robot, friction, model.regressor.armature or armature, model.torque_constants_Nm_A)
 
 
