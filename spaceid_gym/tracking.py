@@ -36,7 +36,7 @@ Fault detection and recovery (never silent): after each streamed window the wind
 window). The noise ``R`` is the previous window's residual variance, itself estimated from ``3T - k`` residuals, so
 for a consistent filter the mean NIS over 3 is F(3n, 3T - k)-distributed rather than chi-square(3n)/3n: the bound is
 that F's point (3.25 for 3001 updates; chi-square's alone, 3.17, sits inside the measured spread of consistent
-missions, whose largest window of 360 was 3.19). When it fires the filter is re-initialised from ``hybrid``'s fit of
+missions, whose largest window of 351 was 3.19). When it fires the filter is re-initialised from ``hybrid``'s fit of
 THAT window, exactly as on the first window (``--first-window batch``: state and Cramér-Rao covariance, nothing
 carried from the diverged state), and it is recorded: ``reinitialised`` (1) and ``alarm_nis_mean`` (the NIS that
 fired) in ``track.csv``, the count and the windows in ``track.json``'s summary, a line printed by the command and a
