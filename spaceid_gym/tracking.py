@@ -31,6 +31,18 @@ sensors' carried through the model (white, ~4 % of the variance with the default
 misses. The gyro's noise alone, or the white part by third differences, left the mean NIS 1-2 % high, beyond the
 95 % bounds of 27 000 updates (+-1 %).
 
+Fault detection and recovery (never silent): after each streamed window the window's mean NIS is tested against
+:func:`nis_alarm_bound`, its one-sided upper point at the false-alarm rate :data:`NIS_FALSE_ALARM` (1e-4 per
+window). The noise ``R`` is the previous window's residual variance, itself estimated from ``3T - k`` residuals, so
+for a consistent filter the mean NIS over 3 is F(3n, 3T - k)-distributed rather than chi-square(3n)/3n: the bound is
+that F's point (3.25 for 3001 updates; chi-square's alone, 3.17, sits inside the measured spread of consistent
+missions, whose largest window of 351 was 3.19). When it fires the filter is re-initialised from ``hybrid``'s fit of
+THAT window, exactly as on the first window (``--first-window batch``: state and Cramér-Rao covariance, nothing
+carried from the diverged state), and it is recorded: ``reinitialised`` (1) and ``alarm_nis_mean`` (the NIS that
+fired) in ``track.csv``, the count and the windows in ``track.json``'s summary, a line printed by the command and a
+red marker in ``track.png``. That window's NEES is the re-initialised filter's, and its NIS, like the first
+window's, is left out of the NIS figure (``ukf_nis_mean`` nan, ``ukf_updates`` 0).
+
 Judged per window against the truth: the fuel error of the filter (after the window) and of ``hybrid`` on the window
 alone; the NEES ``e^T P^-1 e`` of the filter's 4 unknowns (chi-square(4) when consistent) and the mean NIS
 ``y^T S^-1 y`` of its updates in the window (chi-square(3) each); over the mission: the fuel-mass RMS errors and
@@ -56,7 +68,7 @@ from typing import Any
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
-from scipy.stats import chi2
+from scipy.stats import chi2, f
 from scipy.stats import t as t_dist
 
 from estimators.estimate import Estimate
@@ -84,6 +96,12 @@ FIRST_WINDOW = ("batch", "ukf")
 
 #: the confidence of the consistency bounds
 LEVEL = 0.95
+
+#: the per-window false-alarm rate of the NIS fault test: 10 windows x hundreds of missions must see about none
+NIS_FALSE_ALARM = 1e-4
+
+#: the innovations' dimension (the gyro's 3 axes)
+INNOVATION_DOF = 3
 
 
 @dataclass(frozen=True)
@@ -160,10 +178,12 @@ def track_mission(
     rows: list[dict[str, Any]] = []
     samples: list[dict[str, Any]] = []
     tracker = None
+    noise_dof = 0  # the degrees of freedom of the previous window's residual noise, set after each window
     for window in windows:
         start = time.perf_counter()
         problem = model.problem(window.log)
         fitted = None
+        alarm_nis = math.nan
         if tracker is None:
             tracker, fitted = first_window_tracker(ukf, problem, first_window, seed)
             noise = tracker.noise_std_rad_s
@@ -189,10 +209,16 @@ def track_mission(
                         }
                     )
             nis = float(np.mean(tracker.nis[first_update:]))
+            if nis > nis_alarm_bound(problem.n_samples, noise_dof):
+                alarm_nis = nis  # diverged: restart from this window's batch fit, nothing carried over
+                tracker, fitted = first_window_tracker(ukf, problem, "batch", seed)
+                tracker.random_walk = walk.copy()
+                noise, nis = tracker.noise_std_rad_s, math.nan
         filter_s = time.perf_counter() - start
         x, cov = tracker.estimate()
         window_noise = noise
         noise = problem.noise_std(x)[0]  # for the next window
+        noise_dof = INNOVATION_DOF * problem.n_samples - problem.n_params
         error = x - window.theta_true
         if fitted is None:
             fitted = hybrid.fit(model, window.log)
@@ -213,6 +239,8 @@ def track_mission(
                 "ukf_updates": 0 if math.isnan(nis) else int(problem.n_samples),
                 "ukf_noise_std_rad_s": window_noise,
                 "ukf_wall_time_s": filter_s,
+                "reinitialised": int(not math.isnan(alarm_nis)),
+                "alarm_nis_mean": alarm_nis,
                 "hybrid_fuel_consumed_kg": float(fitted.theta[0]),
                 "hybrid_fuel_std_kg": float(fitted.theta_std[0]),
                 "hybrid_tank_x_m": float(fitted.theta[1]),
@@ -237,6 +265,14 @@ def mean_bounds(dof_each: int, n: int, level: float = LEVEL) -> tuple[float, flo
     """Two-sided ``level`` bounds of the mean of ``n`` independent chi-square(``dof_each``) values."""
     tail = 0.5 * (1.0 - level)
     return float(chi2.ppf(tail, dof_each * n) / n), float(chi2.ppf(1.0 - tail, dof_each * n) / n)
+
+
+def nis_alarm_bound(updates: int, noise_dof: int, false_alarm: float = NIS_FALSE_ALARM) -> float:
+    """The upper ``1 - false_alarm`` point of a consistent filter's mean NIS over ``updates`` 3-axis innovations when
+    ``R`` is a residual variance estimated with ``noise_dof`` degrees of freedom: 3 F(3 updates, noise_dof)."""
+    if updates < 1 or noise_dof < 1:
+        raise SpaceIdInputError(f"nis_alarm_bound: expected updates and noise_dof >= 1, got {updates}, {noise_dof}")
+    return float(INNOVATION_DOF * f.ppf(1.0 - false_alarm, INNOVATION_DOF * updates, noise_dof))
 
 
 def _runs_by_windows(values: FloatArray, name: str) -> FloatArray:
@@ -324,6 +360,8 @@ def summarise_track(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "nis_updates": int(updates),
         "nis_bounds_95": [nis_low, nis_high],
         "nis_consistent": bool(nis_low <= nis <= nis_high) if updates else False,
+        "reinitialisations": sum(int(r.get("reinitialised", 0)) for r in rows),
+        "reinitialised_windows": [r["window"] for r in rows if r.get("reinitialised", 0)],
     }
 
 
@@ -345,6 +383,11 @@ def plot_track(path: Path, rows: list[dict[str, Any]], samples: list[dict[str, A
         )
         top.plot(pos, x, color="tab:blue", lw=0.8)
     ends = w + 1.0
+    label = "re-initialised (NIS alarm)"
+    for end in ends[[bool(r.get("reinitialised", 0)) for r in rows]]:
+        bottom.axvline(end, color="tab:red", ls="--", lw=1.0)
+        top.axvline(end, color="tab:red", ls="--", lw=1.0, label=label)
+        label = None
     top.step(np.r_[w, ends[-1]], np.r_[truth, truth[-1]], where="post", color="k", lw=1.2, label="truth")
     top.errorbar(ends, ukf, yerr=3 * ukf_std, fmt="o", color="tab:blue", ms=4, capsize=3, label="ukf after the window (3 sigma)")
     top.errorbar(
@@ -425,7 +468,14 @@ def run_track(args: argparse.Namespace) -> None:
             f"{r['window']:6d} | {r['true_fuel_consumed_kg']:8.2f} | {r['ukf_fuel_consumed_kg']:7.2f} +- {r['ukf_fuel_std_kg']:5.2f}"
             f" | {r['hybrid_fuel_consumed_kg']:7.2f} +- {r['hybrid_fuel_std_kg']:5.2f} | {r['ukf_nees']:6.2f} | {nis}"
         )
+    for r in rows:
+        if r["reinitialised"]:
+            print(
+                f"window {r['window']}: mean NIS {r['alarm_nis_mean']:.3f} above the alarm bound "
+                f"(false-alarm rate {NIS_FALSE_ALARM:g}): the filter was re-initialised from hybrid's fit of the window"
+            )
     s = summary
+    print(f"re-initialisations: {s['reinitialisations']} (windows {s['reinitialised_windows']})")
     print(
         f"fuel RMS error: ukf {s['fuel_rms_error_ukf_kg']:.2f} kg, hybrid {s['fuel_rms_error_hybrid_kg']:.2f} kg "
         f"(ratio {s['fuel_rms_ratio_ukf_over_hybrid']:.2f}; target <= 1.5)"
