@@ -213,8 +213,8 @@ SIMPLEX_X_TOLERANCE, SIMPLEX_F_TOLERANCE, SIMPLEX_MAX_EVALUATIONS = 1e-3, 1e-3, 
 @njit(cache=True)
 def _simplex_minimum(
     x0: FloatArray, d: FloatArray, x_tolerance: float, f_tolerance: float, max_evaluations: int
-) -> tuple[FloatArray, float, int]:
-    """The minimum ``(x, -log L, evaluations)`` of :func:`_negative_log_likelihood` on one axis's differences ``d`` from ``x0`` (2,):
+) -> tuple[FloatArray, float]:
+    """The minimum ``(x, -log L)`` of :func:`_negative_log_likelihood` on one axis's differences ``d`` from ``x0`` (2,):
     the Nelder-Mead simplex (Lagarias, Reeds, Wright and Wright 1998: reflection 1, expansion 2, contraction and
     shrink 1/2), compiled with its objective (the likelihood costs ~9 us, a Python-level simplex ~30 us more per
     point). The first simplex steps each coordinate of ``x0`` by 5 % (0.00025 where it is 0). Stops when the simplex
@@ -276,7 +276,7 @@ def _simplex_minimum(
             evaluations += n
         order = np.argsort(values, kind="mergesort")
         sim, values = sim[order], values[order]
-    return sim[0].copy(), values[0], evaluations
+    return sim[0].copy(), values[0]
 
 
 def fit_attitude_noise(differences: FloatArray, start: AttitudeNoise | None = None) -> AttitudeNoise:
@@ -301,7 +301,7 @@ def fit_attitude_noise(differences: FloatArray, start: AttitudeNoise | None = No
             starts.append(np.array([_logit_share(near_w2, near_r2), _logit(start.walk_correlation[axis])]))
         best = None
         for x0 in starts:
-            x, value, _ = _simplex_minimum(x0, d, SIMPLEX_X_TOLERANCE, SIMPLEX_F_TOLERANCE, SIMPLEX_MAX_EVALUATIONS)
+            x, value = _simplex_minimum(x0, d, SIMPLEX_X_TOLERANCE, SIMPLEX_F_TOLERANCE, SIMPLEX_MAX_EVALUATIONS)
             if best is None or value < best[1]:
                 best = (x, value)
         assert best is not None

@@ -287,7 +287,7 @@ def test_the_compiled_simplex_reaches_scipys_nelder_mead_minimum(seed: int) -> N
         steps[k] = [0.0, 0.0, 0.9, 0.0][seed] * steps[k - 1] + innovations[k]
     d = np.diff(1e-6 * rng.standard_normal(n) + np.cumsum(steps))
     for x0 in ([3.0, -2.9], [0.0, 0.0], [-2.0, 3.0]):
-        x, value, _ = _simplex_minimum(np.array(x0), d, SIMPLEX_X_TOLERANCE, SIMPLEX_F_TOLERANCE, SIMPLEX_MAX_EVALUATIONS)
+        x, value = _simplex_minimum(np.array(x0), d, SIMPLEX_X_TOLERANCE, SIMPLEX_F_TOLERANCE, SIMPLEX_MAX_EVALUATIONS)
         reference = minimize(
             _negative_log_likelihood,
             np.array(x0),
