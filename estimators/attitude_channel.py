@@ -17,13 +17,19 @@ first sample (``A_k = R_0^T R_k``, ``R`` base to inertial):
   (without the gyro's measurement effects) at the step's midpoint, from the encoders: joint angles
   ``(q_{j-1} + q_j) / 2`` and rates ``(q_j - q_{j-1}) / dt_j``. Encoder differences rather than the logged
   joint rates: their noise telescopes too, where the rate sensors' noise would integrate into a random walk
-  of the predicted attitude. Midpoint rule: its error per step is O(dt^3) (tests hold the whole channel to
-  1e-7 rad on a noise-free log);
+  of the predicted attitude. The midpoint rule's own error (O(dt^3) per step, systematic where the joints sweep an
+  area in joint space) is taken out at a reference set of unknowns (:mod:`estimators.attitude_integration`:
+  a fourth-order rule less the midpoint rule, held fixed), so that the model's prediction is exact to ~1e-8 rad
+  over a minute at 20 Hz;
 * residual ``e_k = Phi_hat_k - Phi_k``, compared through its first differences ``d_k = e_k - e_{k-1}``
   (the constant ``A_0 n_0`` drops out).
 
 The residual's error model (:class:`~estimators.attitude_noise.AttitudeNoise`: the attitude source's white error and
-the model's own wander, fitted by maximum likelihood per axis) whitens it into a chi-square. A precise attitude source
+the model's own wander, fitted by maximum likelihood per axis) whitens it into a chi-square, in the residual's own
+principal axes (:func:`noise_axes`): the encoders' noise reaches the predicted attitude through the arm's momentum map,
+a few directions of it, and with a precise attitude source it is most of the residual (two axes of the first
+sample's frame were correlated at -0.94 on a noise-free attitude at 100 Hz); per axis of the frame, that correlation
+was missed and a slosh candidate at its 2 Hz bound fitted the misdescribed noise (likelihood ratio 22). A precise attitude source
 (noise-free or filtered) therefore no longer makes the model's wander look like a missing effect; how well the model
 describes a log's attitude errors is checked by the whiteness of the whitened residual (``diagnose`` falls back to the
 gyro alone where it is not white). An attitude fused on board with the same gyro is compared given the gyro
@@ -38,8 +44,9 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
-from scipy.spatial.transform import Rotation, Slerp
+from scipy.spatial.transform import Rotation
 
+from estimators.attitude_integration import fourth_order_increments, midpoint_log
 from estimators.attitude_noise import AttitudeNoise, fit_attitude_noise
 from estimators.problem import IdentificationModel
 from spaceid_gym.arrays import FloatArray
@@ -141,32 +148,6 @@ def estimate_gyro_coupling(differences: FloatArray, gyro_steps: FloatArray, dt_s
     return GyroCoupling(coefficients)
 
 
-def midpoint_log(log: MeasurementLog) -> MeasurementLog:
-    """The log's steps as samples: sample 0 as logged, then sample ``j`` (1..T-1) at the midpoint of step ``j``.
-
-    Midpoint samples carry ``t = (t_{j-1} + t_j) / 2``, joint angles ``(q_{j-1} + q_j) / 2``, joint rates from the
-    encoders ``(q_j - q_{j-1}) / dt_j``, the attitude interpolated on SO(3) and the mean gyro rate. Sample 0 keeps
-    the first sample's time and attitude, the reference of the effect terms (momentum in the first sample's axes).
-    """
-    quat = log.quat_base_to_inertial_wxyz
-    if quat is None:
-        raise SpaceIdInputError("attitude channel: the log has no attitude quaternions (no star tracker)")
-    t = np.asarray(log.t_s, dtype=float)
-    q = np.asarray(log.q_rad, dtype=float)
-    dt = np.diff(t)
-    mid_t = 0.5 * (t[:-1] + t[1:])
-    rotations = Rotation.from_quat(np.asarray(quat, dtype=float), scalar_first=True)
-    mid_quat = Slerp(t, rotations)(mid_t).as_quat(scalar_first=True)
-    omega = np.asarray(log.omega_base_body_rad_s, dtype=float)
-    return MeasurementLog(
-        t_s=np.concatenate(([t[0]], mid_t)),
-        q_rad=np.concatenate((q[:1], 0.5 * (q[:-1] + q[1:]))),
-        dq_rad_s=np.concatenate((log.dq_rad_s[:1], np.diff(q, axis=0) / dt[:, None])),
-        omega_base_body_rad_s=np.concatenate((omega[:1], 0.5 * (omega[:-1] + omega[1:]))),
-        quat_base_to_inertial_wxyz=np.concatenate((np.asarray(quat[:1], dtype=float), mid_quat)),
-    )
-
-
 #: the midpoint log of each log (:func:`midpoint_log`), made once and shared by every model's channel on it
 _MIDPOINT_LOGS: weakref.WeakKeyDictionary[MeasurementLog, MeasurementLog] = weakref.WeakKeyDictionary()
 
@@ -179,49 +160,43 @@ def _shared_midpoint_log(log: MeasurementLog) -> MeasurementLog:
     return midpoint
 
 
-#: the fewest samples for which the channel takes its integration error's shape out (:func:`truncation_shape`)
-MIN_SAMPLES_FOR_TRUNCATION = 9
+def reference_theta(model: IdentificationModel, reference: FloatArray | None) -> FloatArray:
+    """The unknowns (k,) of ``model`` at which a channel takes its integration error out: ``reference`` (the first
+    unknowns, e.g. a baseline's fit, whose model ``model`` extends) followed by ``model``'s nominal (its added effects
+    off), or the nominal when ``reference`` is ``None``."""
+    nominal = np.asarray(model.parameters.nominal, dtype=float)
+    if reference is None:
+        return nominal
+    reference = np.asarray(reference, dtype=float)
+    if reference.ndim != 1 or len(reference) > len(nominal) or not np.all(np.isfinite(reference)):
+        raise SpaceIdInputError(
+            f"attitude channel: reference expected at most {len(nominal)} finite unknowns, got shape {reference.shape}"
+        )
+    return np.concatenate((reference, nominal[len(reference) :]))
 
 
-def truncation_shape(model: IdentificationModel, log: MeasurementLog, channel: AttitudeChannel) -> FloatArray:
-    """The shape (T, 3), rad, of the error the channel's midpoint integration makes on ``log`` (Richardson): the
-    model's accumulated rotation at the model's nominal parameters (effects off) integrated over the log's steps,
-    less the same integrated over double steps (every other sample), at the even samples, linear between them.
-
-    The midpoint rule's error per step is of order ``h^3`` and systematic where the base wobbles about two axes and
-    the joints sweep an area in joint space (the rotation a free-floating base gets from a closed joint path): at
-    20 Hz on paper6 ~2e-6 rad over 60 s, more than a noise-free attitude's error, and a constant momentum or a
-    payload fits part of it. The double-step integration makes four times that error (``h^2`` per unit time), so
-    the difference has the error's shape; its size per axis is left free (:meth:`AttitudeChannel.set_truncation`)."""
-    theta = np.asarray(model.parameters.nominal, dtype=float)
-    fine = channel.predicted(theta)[0]
-    quat = log.quat_base_to_inertial_wxyz
-    assert quat is not None
-    coarse_log = MeasurementLog(
-        t_s=log.t_s[::2],
-        q_rad=log.q_rad[::2],
-        dq_rad_s=log.dq_rad_s[::2],
-        omega_base_body_rad_s=log.omega_base_body_rad_s[::2],
-        quat_base_to_inertial_wxyz=quat[::2],
-    )
-    coarse = AttitudeChannel(model.problem(midpoint_log(coarse_log)), coarse_log).predicted(theta)[0]
-    even = fine[::2] - coarse
-    t = np.asarray(log.t_s, dtype=float)
-    return np.stack([np.interp(t, t[::2], even[:, axis]) for axis in range(3)], axis=1)
+#: the fourth-order increments of each log per robot and reference (:func:`~estimators.attitude_integration.
+#: fourth_order_increments`), made once and shared by every model's channel on it (added effects off: the same)
+_INCREMENTS: weakref.WeakKeyDictionary[MeasurementLog, dict[tuple[Any, ...], FloatArray]] = weakref.WeakKeyDictionary()
 
 
-#: the truncation shape of each log per robot (:func:`truncation_shape`), made once and shared by every model's channel
-_TRUNCATIONS: weakref.WeakKeyDictionary[MeasurementLog, dict[str, FloatArray]] = weakref.WeakKeyDictionary()
+def _shared_increments(model: IdentificationModel, log: MeasurementLog, theta: FloatArray, n_reference: int) -> FloatArray:
+    """:func:`~estimators.attitude_integration.fourth_order_increments` of ``log`` at ``theta``, made once per log,
+    robot and reference (its first ``n_reference`` unknowns; the rest are ``model``'s added effects, off)."""
+    increments = _INCREMENTS.setdefault(log, {})
+    key = (model.robot.name, model.parameters.names[:n_reference], theta[:n_reference].tobytes())
+    if key not in increments:
+        increments[key] = fourth_order_increments(model, log, theta)
+    return increments[key]
 
 
-def _shared_truncation(model: IdentificationModel, log: MeasurementLog, channel: AttitudeChannel) -> FloatArray:
-    """:func:`truncation_shape` of ``log`` for ``model``'s robot, made once per log and robot (effects off, so the same
-    for every model of the robot)."""
-    shapes = _TRUNCATIONS.setdefault(log, {})
-    key = f"{model.robot.name}:{model.parameters.base.name if hasattr(model.parameters, 'base') else model.parameters.name}"
-    if key not in shapes:
-        shapes[key] = truncation_shape(model, log, channel)
-    return shapes[key]
+def noise_axes(differences: FloatArray) -> FloatArray:
+    """The principal axes (3, 3), columns, of a residual's white part: the eigenvectors of the covariance of the second
+    differences of its steps ``differences`` (n, 3), which leave a slow misfit out and see the white error whole."""
+    second = np.diff(np.asarray(differences, dtype=float), axis=0)
+    if len(second) < 3:
+        return np.eye(3)
+    return np.linalg.eigh(second.T @ second)[1]
 
 
 class AttitudeChannel:
@@ -255,33 +230,51 @@ class AttitudeChannel:
         self._step_map = 0.5 * (relative[:-1] + relative[1:]) * np.diff(np.asarray(log.t_s, dtype=float))[:, None, None]
         self.coupling = coupling
         self._dt_s = np.diff(np.asarray(log.t_s, dtype=float))
+        #: the star tracker's increments, less (after :meth:`set_reference`) the midpoint rule's own error
+        self._raw_steps = increments
         self._measured_steps = increments
-        self._cached: tuple[AttitudeNoise, list[FloatArray], FloatArray | None] | None = None
-        self._truncation: FloatArray | None = None
+        self._relative = relative
+        self._cached: tuple[AttitudeNoise, list[FloatArray]] | None = None
+        self._axes: FloatArray | None = None
+        self.reference: FloatArray | None = None
         self.n_values = 3 * log.n_samples - 6
 
     @classmethod
-    def of(cls, model: IdentificationModel, log: MeasurementLog, coupling: GyroCoupling | None = None) -> AttitudeChannel | None:
-        """The channel of ``model`` on ``log`` (given the gyro with ``coupling``); ``None`` when the log has no attitude
-        or fewer than 3 samples."""
+    def of(
+        cls,
+        model: IdentificationModel,
+        log: MeasurementLog,
+        coupling: GyroCoupling | None = None,
+        reference: FloatArray | None = None,
+    ) -> AttitudeChannel | None:
+        """The channel of ``model`` on ``log`` (given the gyro with ``coupling``), its integration error taken out and
+        its noise axes found at ``reference`` (:func:`reference_theta`: a baseline's unknowns, which ``model`` may extend;
+        ``None``: the nominal); ``None`` when the log has no attitude or fewer than 3 samples. Channels of the same log
+        and reference (whatever effects their models add) compare the attitude alike."""
         if log.quat_base_to_inertial_wxyz is None or log.n_samples < 3:
             return None
         channel = cls(model.problem(_shared_midpoint_log(log)), log, coupling)
-        if log.n_samples >= MIN_SAMPLES_FOR_TRUNCATION:
-            channel.set_truncation(_shared_truncation(model, log, channel))
+        theta = reference_theta(model, reference)
+        n_reference = len(theta) if reference is None else len(reference)
+        channel.set_reference(theta, _shared_increments(model, log, theta, n_reference))
+        channel.reference = theta[:n_reference].copy()
         return channel
 
-    def set_truncation(self, shape: FloatArray) -> None:
-        """Project the steps of ``shape`` (T, 3), rad, the shape of the model's own integration error
-        (:func:`truncation_shape`), out of the residual, one free size per axis (3 fewer values)."""
-        shape = np.asarray(shape, dtype=float)
-        if shape.shape != self.measured.shape or not np.all(np.isfinite(shape)):
+    def set_reference(self, theta: FloatArray, increments: FloatArray) -> None:
+        """Take the midpoint rule's error at ``theta`` (k,) out of every prediction, with ``increments`` (T-1, 3) the
+        fourth-order rotation of each step there (body axes at the step's start); and whiten in the noise axes of the
+        residual there (:func:`noise_axes`)."""
+        increments = np.asarray(increments, dtype=float)
+        if increments.shape != self._measured_steps.shape or not np.all(np.isfinite(increments)):
             raise SpaceIdInputError(
-                f"attitude channel: truncation shape expected {self.measured.shape} finite, got {shape.shape}"
+                f"attitude channel: increments expected {self._measured_steps.shape} finite, got {increments.shape}"
             )
-        self._truncation = np.diff(shape, axis=0)
+        midpoint = np.einsum("tij,tj->ti", self._step_map, self.problem.base_rate(np.atleast_2d(theta), count=False)[0, 1:])
+        fourth = np.einsum("tij,tj->ti", self._relative[:-1], increments)
+        self._measured_steps = self._raw_steps - (fourth - midpoint)
+        self._axes = None
         self._cached = None
-        self.n_values = 3 * len(self.measured) - 6 - 3
+        self._axes = noise_axes(self.differences(theta))
 
     def predicted(self, theta: FloatArray) -> FloatArray:
         """``Phi_hat`` (P, T, 3), rad, for ``theta`` (P, k)."""
@@ -316,8 +309,9 @@ class AttitudeChannel:
         return steps - self.coupling.response(self.gyro_steps(base))
 
     def residuals(self, theta: FloatArray, noise: AttitudeNoise) -> FloatArray:
-        """The whitened differences (3T-6,) at ``theta`` (k,): unit variance and independent under ``noise``."""
-        return self._project(noise.whiten(self.differences(theta), self._factors(noise)), noise).ravel()
+        """The whitened differences (3T-6,) at ``theta`` (k,), in the noise axes: unit variance and independent under
+        ``noise``."""
+        return noise.whiten(self._in_axes(self.differences(theta)), self._factors(noise)).ravel()
 
     def difference_jacobian(self, theta: FloatArray) -> FloatArray:
         """``d differences / d theta`` (T-1, 3, k) at ``theta`` (k,)."""
@@ -331,8 +325,8 @@ class AttitudeChannel:
 
     def jacobian(self, theta: FloatArray, noise: AttitudeNoise) -> FloatArray:
         """``d residuals / d theta`` (3T-6, k) at ``theta`` (k,)."""
-        jac = self.difference_jacobian(theta)
-        return self._project(noise.whiten(jac, self._factors(noise)), noise).reshape(-1, jac.shape[2])
+        jac = self._jacobian_in_axes(self.difference_jacobian(theta))
+        return noise.whiten(jac, self._factors(noise)).reshape(-1, jac.shape[2])
 
     def chi2(self, theta: FloatArray, noise: AttitudeNoise) -> float:
         """The channel's chi-square at ``theta`` (k,) under ``noise`` (``n_values`` degrees of freedom at the truth)."""
@@ -347,7 +341,7 @@ class AttitudeChannel:
             omega = self.problem.base_rate(np.atleast_2d(thetas))[:, 1:]
             differences = np.einsum("tij,ptj->pti", self._step_map, omega) - self._measured_steps
         factors = self._factors(noise)
-        return np.array([float(np.sum(self._project(noise.whiten(d, factors), noise) ** 2)) for d in differences])
+        return np.array([float(np.sum(noise.whiten(d, factors) ** 2)) for d in self._in_axes(differences)])
 
     def fisher(self, theta: FloatArray, noise: AttitudeNoise) -> FloatArray:
         """Fisher information (k, k) of the attitude source about ``theta`` (k,) under ``noise``."""
@@ -357,11 +351,7 @@ class AttitudeChannel:
     def estimate_noise(self, theta: FloatArray, start: AttitudeNoise | None = None) -> AttitudeNoise:
         """The error model fitted to the residual at ``theta`` (k,) by maximum likelihood (:func:`fit_attitude_noise`;
         ``start``: a nearby fit's error model, tried as one more start)."""
-        differences = self.differences(theta)
-        if self._truncation is not None:  # the integration error's shape taken out first (least squares per axis)
-            x = self._truncation
-            differences = differences - x * (np.sum(x * differences, axis=0) / np.maximum(np.sum(x * x, axis=0), 1e-300))
-        return fit_attitude_noise(differences, start)
+        return fit_attitude_noise(self._in_axes(self.differences(theta)), start)
 
     def profile_chi2(self, theta: FloatArray, noise: AttitudeNoise, reference: AttitudeNoise) -> float:
         """``-2 log L`` of the residual at ``theta`` (k,) under ``noise``, less that of a white residual under
@@ -373,19 +363,15 @@ class AttitudeChannel:
         return self.chi2(theta, noise) + noise.log_det(n_steps) - reference.log_det(n_steps)
 
     def _factors(self, noise: AttitudeNoise) -> list[FloatArray]:
-        """The whitening factors of ``noise``, cached for the last noise model asked (with the whitened truncation)."""
+        """The whitening factors of ``noise``, cached for the last noise model asked."""
         if self._cached is None or self._cached[0] != noise:
-            factors = noise.factors(len(self._measured_steps))
-            shape = None if self._truncation is None else noise.whiten(self._truncation, factors)
-            self._cached = (noise, factors, shape)
+            self._cached = (noise, noise.factors(len(self._measured_steps)))
         return self._cached[1]
 
-    def _project(self, whitened: FloatArray, noise: AttitudeNoise) -> FloatArray:
-        """``whitened`` (T-2, 3[, k]) less its projection on the whitened truncation shape, axis by axis."""
-        self._factors(noise)
-        assert self._cached is not None
-        x = self._cached[2]
-        if x is None:
-            return whitened
-        x = x if whitened.ndim == 2 else x[:, :, None]
-        return whitened - x * (np.sum(x * whitened, axis=0) / np.maximum(np.sum(x * x, axis=0), 1e-300))
+    def _in_axes(self, steps: FloatArray) -> FloatArray:
+        """``steps`` (..., 3), vectors in the first sample's frame, in the noise axes."""
+        return steps if self._axes is None else steps @ self._axes
+
+    def _jacobian_in_axes(self, jac: FloatArray) -> FloatArray:
+        """``jac`` (T-1, 3, k), derivatives of steps in the first sample's frame, in the noise axes."""
+        return jac if self._axes is None else np.einsum("tik,ij->tjk", jac, self._axes)

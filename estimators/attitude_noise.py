@@ -1,14 +1,15 @@
 """The attitude residual's error model: the attitude source's white error and the model's own wander.
 
-Per axis of the first sample's base frame, the attitude channel's residual (:mod:`estimators.attitude_channel`) is
+Per noise axis (the principal axes of the residual's white part in the first sample's base frame), the attitude
+channel's residual (:mod:`estimators.attitude_channel`) is
 modelled as
 
 * the attitude source's white error ``w_k`` (std ``white_std_rad``): a star tracker's noise;
 * the model's own accumulated error ``s_k``, whose steps ``a_k = s_k - s_{k-1}`` are a first-order
   autoregression, ``a_k = phi a_{k-1} + nu_k`` (``walk_std_rad``: std of ``nu``; ``walk_correlation``: ``phi``
   in ``[0, 1)``). ``phi = 0`` is a random walk (encoder and rate noise through the nonlinear momentum map, a
-  filtered attitude's drift with its gyro); ``phi`` near 1 a smooth wander (the midpoint rule against the
-  true motion between samples, another simulator's integrator).
+  filtered attitude's drift with its gyro); ``phi`` near 1 a smooth wander (another simulator's integrator, what is
+  left of the channel's own integration error, :mod:`estimators.attitude_integration`).
 
 Then ``u_k = d_k - phi d_{k-1} = w_k - (1 + phi) w_{k-1} + phi w_{k-2} + nu_k`` (``k >= 2``) of the residual's
 differences ``d`` is a moving average of order 2: its covariance is banded, and :meth:`AttitudeNoise.whiten` whitens

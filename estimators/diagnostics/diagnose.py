@@ -261,14 +261,14 @@ def _diagnose(
         # that residual several times the noise, and a gyro so underweighted left the candidates' fits, the missing
         # effect's own included, to the attitude channel (fuel errors of 8-42 Cramer-Rao std after naming a delay on
         # design logs at 100 Hz, docs/results.md)
-        weights = ChannelWeights(white_std, channel.estimate_noise(baseline.theta), channel.coupling)
+        weights = ChannelWeights(white_std, channel.estimate_noise(baseline.theta), channel.coupling, channel.reference)
         # the baseline refitted on both channels with its error model, twice: the second pass is what every candidate
         # gets from the baseline's state (a fit under its error model, the error model refitted, the fit refined), so
         # that no candidate gains from one more round of the alternation than the baseline had
         for _ in range(2):
             baseline = fit_model(model, log, starts=[baseline.theta], weights=weights, channel=channel, profile_noise=True)[0]
             assert baseline.attitude_noise is not None
-            weights = ChannelWeights(white_std, baseline.attitude_noise, channel.coupling)
+            weights = ChannelWeights(white_std, baseline.attitude_noise, channel.coupling, channel.reference)
         # the baseline's own error model weights every candidate's fit and is the reference of the log-determinants
         baseline.attitude_chi2 = channel.chi2(baseline.theta, weights.attitude)
     fits, variants_tried = [], 0
@@ -364,7 +364,7 @@ def _better_of_refit(
 ) -> ModelFit:
     """``fit`` (of ``extended``, ``problem`` its problem on ``log``) fitted again from ``starts``: the better of the two
     by the chi-square at ``white_std`` (rad/s), with the time of both."""
-    ext_channel = None if channel is None else AttitudeChannel.of(extended, log, channel.coupling)
+    ext_channel = None if channel is None else AttitudeChannel.of(extended, log, channel.coupling, channel.reference)
     refit = fit_model(
         extended, log, starts=starts, effect=fit.effect, weights=weights, channel=ext_channel, problem=problem, profile_noise=True
     )[0]
@@ -441,7 +441,7 @@ def _fit_candidate(
             grid += [np.concatenate((point, s)) for s in term.grid(point[:k_base])]
     n0 = len(baseline.theta)  # the model's own unknowns (base and effects already in it), then the candidate's
     grid += [np.concatenate((v.theta[:n0], s)) for v in other_variants for s in term.grid_from_variant(v.theta[n0:])]
-    extended_channel = None if channel is None else AttitudeChannel.of(extended, log, channel.coupling)
+    extended_channel = None if channel is None else AttitudeChannel.of(extended, log, channel.coupling, channel.reference)
     starts = best_of_grid(problem, grid, extended_channel, weights)
     starts.append(np.concatenate((restart, term.starts(restart[:k_base])[0])))
     starts.append(np.concatenate((baseline.theta, term.nominal)))  # the baseline itself: the nested model's fit

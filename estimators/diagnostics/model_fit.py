@@ -78,10 +78,19 @@ class ChannelWeights:
     gyro_std_rad_s: float
     attitude: AttitudeNoise
     coupling: GyroCoupling | None = None  # the attitude's response to the gyro (a fused attitude), or None
+    #: the unknowns at which the channel takes its integration error out and finds its noise axes (the baseline's fit;
+    #: :meth:`~estimators.attitude_channel.AttitudeChannel.of`), or None (the nominal)
+    reference: FloatArray | None = None
 
     def to_dict(self) -> dict[str, Any]:
         coupling = None if self.coupling is None else self.coupling.to_dict()
-        return {"gyro_std_rad_s": self.gyro_std_rad_s, **self.attitude.to_dict(), "attitude_coupling": coupling}
+        reference = None if self.reference is None else [float(v) for v in self.reference]
+        return {
+            "gyro_std_rad_s": self.gyro_std_rad_s,
+            **self.attitude.to_dict(),
+            "attitude_coupling": coupling,
+            "attitude_reference": reference,
+        }
 
 
 @dataclass
@@ -193,7 +202,7 @@ def fit_model(
     if weights is None:
         channel = None
     elif channel is None:
-        channel = AttitudeChannel.of(model, log, weights.coupling)
+        channel = AttitudeChannel.of(model, log, weights.coupling, weights.reference)
     estimate = None
     if estimator is not None:
         estimate = estimator.fit_problem(problem)
@@ -225,7 +234,9 @@ def fit_model(
         if not profile_noise:
             noise = weights.attitude
         elif estimator is None:
-            noise = own.attitude
+            # refitted at the final fit: the profile likelihood at it; the error model of the refined fit's start,
+            # kept, left the baseline up to 17 units of -2 log L above its own profile, which candidates then gained
+            noise = channel.estimate_noise(theta, own.attitude)
         else:
             noise = channel.estimate_noise(theta, weights.attitude)
         whitened = channel.residuals(theta, noise)
@@ -414,7 +425,7 @@ def independent_attitude_channel(
     the gyro's noise; counting them as a second measurement counted that noise twice (clean logs named gyro_scale or
     slosh), and dropping them lost what the star tracker inside the fusion measures (a gyro bias on a heavy base was
     named initial_momentum: on the gyro alone the two fit within 2 chi-square units)."""
-    channel = AttitudeChannel.of(model, log)
+    channel = AttitudeChannel.of(model, log, reference=theta)
     if channel is None:
         return AttitudeIndependence(None, (0.0, 1.0))
     gyro_residual = model.problem(log).residuals(theta, count=False).reshape(-1, 3)
@@ -427,7 +438,7 @@ def independent_attitude_channel(
         return AttitudeIndependence(None, raw, too_short=True)
     gyro_steps = channel.gyro_steps(channel.problem.base_rate(np.atleast_2d(theta), count=False))[0]
     coupling = estimate_gyro_coupling(differences, gyro_steps, float(np.median(dt_s)))
-    coupled = AttitudeChannel.of(model, log, coupling)
+    coupled = AttitudeChannel.of(model, log, coupling, reference=theta)
     assert coupled is not None
     return AttitudeIndependence(coupled, raw, attitude_gyro_dependence(coupled.differences(theta), gyro_residual, dt_s))
 

@@ -52,12 +52,14 @@ def apply_effect(
     options: dict[str, Any] = {"from": "the candidate's least-squares fit in the diagnosis"}
     extra_information = None
     weights = diagnosis.weights
-    channel = None if weights is None else AttitudeChannel.of(extended, log, weights.coupling)
+    channel = None if weights is None else AttitudeChannel.of(extended, log, weights.coupling, weights.reference)
     if channel is not None and weights is not None:
         # fitted to the gyro and the star tracker: the bound is that of both
         options["attitude_noise"] = weights.attitude.to_dict()
         if weights.coupling is not None:
             options["attitude_coupling"] = weights.coupling.to_dict()
+        if weights.reference is not None:
+            options["attitude_reference"] = [float(v) for v in weights.reference]
         extra_information = channel.fisher(fit.theta, weights.attitude)
     return extended, problem.make_estimate(
         fit.theta,
@@ -142,10 +144,16 @@ def parameter_errors(
     index = [model.parameters.names.index(n) for n in FUEL_PARAMETER_NAMES]
     attitude_noise = estimate.options.get("attitude_noise")
     coupling = estimate.options.get("attitude_coupling")
+    reference = estimate.options.get("attitude_reference")
     channel = (
         None
         if attitude_noise is None
-        else AttitudeChannel.of(model, log, None if coupling is None else GyroCoupling.from_dict(coupling))
+        else AttitudeChannel.of(
+            model,
+            log,
+            None if coupling is None else GyroCoupling.from_dict(coupling),
+            None if reference is None else np.asarray(reference, dtype=float),
+        )
     )
     extra_information = None if channel is None else channel.fisher(theta_true, AttitudeNoise.from_dict(attitude_noise))
     std = model.problem(log).crlb_std(theta_true, estimate.noise_std_rad_s, extra_information)
