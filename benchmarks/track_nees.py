@@ -1,9 +1,9 @@
 """Where the tracking filter's NEES comes from: each window's error per unknown in the filter's own std.
 
-For each mission seed: the mission of ``spaceid track`` (paper6, 10 windows, the first taken from ``hybrid``'s fit
-with its Cramér-Rao covariance), then the filter window by window with ``--passes`` tempered passes over each later
-window (1: the plain filter ``spaceid track`` runs; P: the noise variance times P, state and covariance carried,
-as the ``ukf`` estimator's fit does). Prints per window the NEES and ``z = error / std`` of the fuel consumed and of
+For each mission seed: the mission of ``spaceid track`` (paper6, 10 windows, the first taken as ``--first-window``
+says: ``posterior`` by default, ``batch`` for ``hybrid``'s fit with its Cramér-Rao covariance), then the filter
+window by window with ``--passes`` tempered passes over each later window (1: the plain filter ``spaceid track``
+runs; P: the noise variance times P, state and covariance carried, as the ``ukf`` estimator's fit does). Prints per window the NEES and ``z = error / std`` of the fuel consumed and of
 the three tank coordinates, then the mission's mean NEES. A consistent filter has z ~ N(0, 1) in each unknown
 and the mean NEES within the 95 % bounds of chi-square(4)'s mean (bounds that take the windows as independent).
 Over two or more seeds: per unknown the mean ``z^2`` over every window and the correlation of a mission's window
@@ -12,7 +12,7 @@ each window index (seeded): how far the windows of a mission are from independen
 
 Usage::
 
-    python benchmarks/track_nees.py --passes 1 102 105 101
+    python benchmarks/track_nees.py --passes 1 --first-window batch 102 105 101
 """
 
 from __future__ import annotations
@@ -42,6 +42,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("seeds", type=int, nargs="+", help="mission seeds")
     parser.add_argument("--passes", type=int, default=1, help="tempered passes over each later window (default 1)")
+    parser.add_argument("--first-window", choices=("posterior", "batch"), default="posterior", help="the first window's start")
     args = parser.parse_args()
     model = IdentificationModel(load_robot("paper6"), "fuel")
     low, high = mean_bounds(4, 10)
@@ -52,7 +53,7 @@ def main() -> None:
         for window in windows:
             problem = model.problem(window.log)
             if tracker is None:
-                tracker, _ = first_window_tracker(_ukf("ukf", seed), problem, "batch", seed)
+                tracker, _ = first_window_tracker(_ukf("ukf", seed), problem, args.first_window, seed)
                 tracker.random_walk = mission_random_walk("paper6", DEFAULT_GAP_S)
                 noise = tracker.noise_std_rad_s
             else:

@@ -64,6 +64,8 @@ def test_a_diverged_mission_is_reinitialised_and_says_so(tmp_path: Path, capsys:
         rows = list(csv.DictReader(f))
     assert [r["reinitialised"] for r in rows] == ["0", "1"]
     assert float(rows[1]["alarm_nis_mean"]) > 4.0 and rows[1]["ukf_nis_mean"] == "nan"
-    assert rows[1]["ukf_fuel_consumed_kg"] == rows[1]["hybrid_fuel_consumed_kg"]
+    # restarted at the posterior mean around hybrid's fit of window 1, not carried from the diverged state
+    ukf, fit, std = (float(rows[1][k]) for k in ("ukf_fuel_consumed_kg", "hybrid_fuel_consumed_kg", "hybrid_fuel_std_kg"))
+    assert abs(ukf - fit) < std
     summary = json.loads((tmp_path / "track.json").read_text())["summary"]
     assert summary["reinitialisations"] == 1 and summary["reinitialised_windows"] == [1]
