@@ -177,10 +177,14 @@ def reference_theta(model: IdentificationModel, reference: FloatArray | None) ->
 
 #: the fourth-order increments of each log per robot and reference (:func:`~estimators.attitude_integration.
 #: fourth_order_increments`), made once and shared by every model's channel on it (added effects off: the same)
-_INCREMENTS: weakref.WeakKeyDictionary[MeasurementLog, dict[tuple[Any, ...], FloatArray]] = weakref.WeakKeyDictionary()
+_INCREMENTS: weakref.WeakKeyDictionary[MeasurementLog, dict[tuple[Any, ...], tuple[FloatArray, FloatArray]]] = (
+    weakref.WeakKeyDictionary()
+)
 
 
-def _shared_increments(model: IdentificationModel, log: MeasurementLog, theta: FloatArray, n_reference: int) -> FloatArray:
+def _shared_increments(
+    model: IdentificationModel, log: MeasurementLog, theta: FloatArray, n_reference: int
+) -> tuple[FloatArray, FloatArray]:
     """:func:`~estimators.attitude_integration.fourth_order_increments` of ``log`` at ``theta``, made once per log,
     robot and reference (its first ``n_reference`` unknowns; the rest are ``model``'s added effects, off)."""
     increments = _INCREMENTS.setdefault(log, {})
@@ -234,6 +238,8 @@ class AttitudeChannel:
         self._raw_steps = increments
         self._measured_steps = increments
         self._relative = relative
+        #: the midpoint rule's error's derivative (T-1, 3, r) in the first r unknowns (:meth:`set_reference`)
+        self._error_jacobian: FloatArray | None = None
         self._cached: tuple[AttitudeNoise, list[FloatArray]] | None = None
         self._axes: FloatArray | None = None
         self.reference: FloatArray | None = None
@@ -256,39 +262,67 @@ class AttitudeChannel:
         channel = cls(model.problem(_shared_midpoint_log(log)), log, coupling)
         theta = reference_theta(model, reference)
         n_reference = len(theta) if reference is None else len(reference)
-        channel.set_reference(theta, _shared_increments(model, log, theta, n_reference))
+        increments, jacobian = _shared_increments(model, log, theta, n_reference)
+        # carried to first order in the base's unknowns (the effects' at the reference as they are, added ones off)
+        channel.set_reference(theta, increments, jacobian[:, :, : getattr(model.parameters, "base", model.parameters).n_params])
         channel.reference = theta[:n_reference].copy()
         return channel
 
-    def set_reference(self, theta: FloatArray, increments: FloatArray) -> None:
-        """Take the midpoint rule's error at ``theta`` (k,) out of every prediction, with ``increments`` (T-1, 3) the
-        fourth-order rotation of each step there (body axes at the step's start); and whiten in the noise axes of the
-        residual there (:func:`noise_axes`)."""
-        increments = np.asarray(increments, dtype=float)
-        if increments.shape != self._measured_steps.shape or not np.all(np.isfinite(increments)):
+    def set_reference(self, theta: FloatArray, increments: FloatArray, jacobian: FloatArray) -> None:
+        """Take the midpoint rule's error out of every prediction, to first order about ``theta`` (k,): ``increments``
+        (T-1, 3) is the fourth-order rotation of each step there (body axes at the step's start), ``jacobian``
+        (T-1, 3, r) its derivative in the first ``r`` unknowns (the reference's; the rest, added effects, are off in the
+        correction). And whiten in the noise axes of the residual there (:func:`noise_axes`).
+
+        The error changes with the unknowns (a tenth of it over 5 kg of fuel on quick3), so it is carried to first order
+        in them: a fit far from the reference (a baseline that a missing effect pulled away) keeps it out."""
+        increments, jacobian = np.asarray(increments, dtype=float), np.asarray(jacobian, dtype=float)
+        n_ref = jacobian.shape[2] if jacobian.ndim == 3 else -1
+        if (
+            increments.shape != self._measured_steps.shape
+            or jacobian.shape[:2] != increments.shape
+            or not 0 < n_ref <= len(theta)
+            or not (np.all(np.isfinite(increments)) and np.all(np.isfinite(jacobian)))
+        ):
             raise SpaceIdInputError(
-                f"attitude channel: increments expected {self._measured_steps.shape} finite, got {increments.shape}"
+                f"attitude channel: increments expected {self._measured_steps.shape} and their Jacobian "
+                f"{(*self._measured_steps.shape, len(theta))} at most, finite; got {increments.shape}, {jacobian.shape}"
             )
-        midpoint = np.einsum("tij,tj->ti", self._step_map, self.problem.base_rate(np.atleast_2d(theta), count=False)[0, 1:])
-        fourth = np.einsum("tij,tj->ti", self._relative[:-1], increments)
-        self._measured_steps = self._raw_steps - (fourth - midpoint)
+        theta = np.asarray(theta, dtype=float)
+        rates = self.problem.base_rate(theta[None], count=False)[0, 1:]
+        rate_jacobian = self.problem.base_rate_jacobian(theta, count=False).reshape(len(self.measured), 3, -1)[1:, :, :n_ref]
+        relative = self._relative[:-1]
+        error = np.einsum("tij,tj->ti", relative, increments) - np.einsum("tij,tj->ti", self._step_map, rates)
+        self._error_jacobian = np.einsum("tij,tjk->tik", relative, jacobian) - np.einsum(
+            "tij,tjk->tik", self._step_map, rate_jacobian
+        )
+        # the midpoint rule's error at theta folded into the target: raw - error(theta) + J theta[:r], so that the
+        # differences add J theta[:r] at their own unknowns
+        self._measured_steps = self._raw_steps - error + np.einsum("tik,k->ti", self._error_jacobian, theta[:n_ref])
         self._axes = None
         self._cached = None
         self._axes = noise_axes(self.differences(theta))
 
-    def predicted(self, theta: FloatArray) -> FloatArray:
-        """``Phi_hat`` (P, T, 3), rad, for ``theta`` (P, k)."""
-        omega = self.problem.base_rate(np.atleast_2d(theta))[:, 1:]  # midpoint rates (P, T-1, 3)
-        steps = np.einsum("tij,ptj->pti", self._step_map, omega)
-        return np.concatenate((np.zeros((len(steps), 1, 3)), np.cumsum(steps, axis=1)), axis=1)
+    def _steps(self, thetas: FloatArray, base: FloatArray) -> FloatArray:
+        """The residual's steps (P, T-1, 3) for ``thetas`` (P, k) from the model's base rate there (P, T, 3): the
+        midpoint rule's increments, its own error to first order about the reference, less the star tracker's."""
+        steps = np.einsum("tij,ptj->pti", self._step_map, base[:, 1:]) - self._measured_steps
+        if self._error_jacobian is not None:
+            steps = steps + np.einsum("tik,pk->pti", self._error_jacobian, thetas[:, : self._error_jacobian.shape[2]])
+        return steps
 
     def differences(self, theta: FloatArray) -> FloatArray:
         """``d_k = e_k - e_{k-1}`` (T-1, 3), rad, of the residual ``e = Phi_hat - Phi`` at ``theta`` (k,) (less the
         coupling's response to the gyro's error, with a coupling)."""
-        base = self.problem.base_rate(np.atleast_2d(theta))
-        if self.coupling is not None:
-            return self._coupled(base)[0]
-        return np.einsum("tij,tj->ti", self._step_map, base[0, 1:]) - self._measured_steps
+        thetas = np.atleast_2d(np.asarray(theta, dtype=float))
+        return self._differences(thetas, self.problem.base_rate(thetas))[0]
+
+    def _differences(self, thetas: FloatArray, base: FloatArray) -> FloatArray:
+        """:meth:`differences` (P, T-1, 3) of ``thetas`` (P, k) from the model's base rate there (P, T, 3)."""
+        steps = self._steps(thetas, base)
+        if self.coupling is None:
+            return steps
+        return steps - self.coupling.response(self.gyro_steps(base))
 
     def gyro_steps(self, base: FloatArray) -> FloatArray:
         """The gyro's error integrated over each step, (P, T-1, 3), rad, against the base's own rate ``base`` (P, T, 3)
@@ -302,12 +336,6 @@ class AttitudeChannel:
         the delay on design logs at 100 Hz)."""
         return (base[:, 1:] - self.problem.measured[1:]) * self._dt_s[:, None]
 
-    def _coupled(self, base: FloatArray) -> FloatArray:
-        """Residual steps given the gyro (P, T-1, 3) from the model's base rate (P, T, 3) (see ``coupling``)."""
-        assert self.coupling is not None
-        steps = np.einsum("tij,ptj->pti", self._step_map, base[:, 1:]) - self._measured_steps
-        return steps - self.coupling.response(self.gyro_steps(base))
-
     def residuals(self, theta: FloatArray, noise: AttitudeNoise) -> FloatArray:
         """The whitened differences (3T-6,) at ``theta`` (k,), in the noise axes: unit variance and independent under
         ``noise``."""
@@ -318,6 +346,8 @@ class AttitudeChannel:
         n_t = len(self.measured)
         rates = self.problem.base_rate_jacobian(np.asarray(theta, dtype=float)).reshape(n_t, 3, -1)[1:]
         steps = np.einsum("tij,tjk->tik", self._step_map, rates)
+        if self._error_jacobian is not None:
+            steps[:, :, : self._error_jacobian.shape[2]] += self._error_jacobian
         if self.coupling is None:
             return steps
         response = self.coupling.response(np.moveaxis(rates * self._dt_s[:, None, None], 2, 0))  # (k, T-1, 3)
@@ -335,11 +365,8 @@ class AttitudeChannel:
 
     def chi2s(self, thetas: FloatArray, noise: AttitudeNoise) -> FloatArray:
         """:meth:`chi2` of each row of ``thetas`` (P, k), the model evaluated once for all: (P,)."""
-        if self.coupling is not None:
-            differences = self._coupled(self.problem.base_rate(np.atleast_2d(thetas)))
-        else:
-            omega = self.problem.base_rate(np.atleast_2d(thetas))[:, 1:]
-            differences = np.einsum("tij,ptj->pti", self._step_map, omega) - self._measured_steps
+        thetas = np.atleast_2d(np.asarray(thetas, dtype=float))
+        differences = self._differences(thetas, self.problem.base_rate(thetas))
         factors = self._factors(noise)
         return np.array([float(np.sum(noise.whiten(d, factors) ** 2)) for d in self._in_axes(differences)])
 

@@ -73,38 +73,65 @@ def encoder_tangents(t_s: FloatArray, q_rad: FloatArray) -> FloatArray:
 
 
 def gauss_log(log: MeasurementLog) -> MeasurementLog:
-    """The joint motion at the two Gauss-Legendre nodes of each step (2(T-1) samples, node 1 then node 2 of each
-    step): the cubic Hermite of the step through its two encoder samples with :func:`encoder_tangents`. Only the
-    joint angles and rates are meaningful (the gyro columns are zero; no attitude)."""
+    """The log's first sample as logged, then the joint motion at the two Gauss-Legendre nodes of each step (1 + 2(T-1)
+    samples, node 1 then node 2 of each step): the cubic Hermite of the step through its two encoder samples with
+    :func:`encoder_tangents`, the attitude interpolated on SO(3) and the gyro linearly. Sample 0 is the reference of the
+    effect terms, as in :func:`midpoint_log`."""
+    quat = log.quat_base_to_inertial_wxyz
+    if quat is None:
+        raise SpaceIdInputError("attitude channel: the log has no attitude quaternions (no star tracker)")
     t = np.asarray(log.t_s, dtype=float)
     q = np.asarray(log.q_rad, dtype=float)
+    omega = np.asarray(log.omega_base_body_rad_s, dtype=float)
     dt = np.diff(t)[:, None]
     m = encoder_tangents(t, q)
     n_steps, n_joints = len(dt), q.shape[1]
     t_out = np.empty(2 * n_steps)
     q_out = np.empty((2 * n_steps, n_joints))
     dq_out = np.empty((2 * n_steps, n_joints))
+    omega_out = np.empty((2 * n_steps, 3))
     for node, s in enumerate(GAUSS_NODES):
         # cubic Hermite basis on the step and its derivative, s in [0, 1]
         h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, 3 * s**2 - 2 * s**3, s**3 - s**2
         d00, d10, d01, d11 = 6 * s**2 - 6 * s, 3 * s**2 - 4 * s + 1, 6 * s - 6 * s**2, 3 * s**2 - 2 * s
         q_out[node::2] = h00 * q[:-1] + h10 * dt * m[:-1] + h01 * q[1:] + h11 * dt * m[1:]
         dq_out[node::2] = (d00 * q[:-1] + d01 * q[1:]) / dt + d10 * m[:-1] + d11 * m[1:]
+        omega_out[node::2] = (1.0 - s) * omega[:-1] + s * omega[1:]
         t_out[node::2] = t[:-1] + s * dt[:, 0]
-    return MeasurementLog(t_s=t_out, q_rad=q_out, dq_rad_s=dq_out, omega_base_body_rad_s=np.zeros((2 * n_steps, 3)))
+    rotations = Rotation.from_quat(np.asarray(quat, dtype=float), scalar_first=True)
+    return MeasurementLog(
+        t_s=np.concatenate(([t[0]], t_out)),
+        q_rad=np.concatenate((q[:1], q_out)),
+        dq_rad_s=np.concatenate((log.dq_rad_s[:1], dq_out)),
+        omega_base_body_rad_s=np.concatenate((omega[:1], omega_out)),
+        quat_base_to_inertial_wxyz=np.concatenate(
+            (np.asarray(quat[:1], dtype=float), Slerp(t, rotations)(t_out).as_quat(scalar_first=True))
+        ),
+    )
 
 
-def fourth_order_increments(model: IdentificationModel, log: MeasurementLog, theta: FloatArray) -> FloatArray:
+#: the coning term's factor of ``dt^2 w1 x w2`` for the two Gauss-Legendre nodes' rates ``w1, w2``
+CONING = math.sqrt(3.0) / 12.0
+
+
+def fourth_order_increments(model: IdentificationModel, log: MeasurementLog, theta: FloatArray) -> tuple[FloatArray, FloatArray]:
     """The base's rotation over each step of ``log`` at ``theta`` (k,), (T-1, 3), rad, as a rotation vector in the base's
     axes at the step's start, to fourth order: the base rate at the step's Gauss-Legendre nodes (:func:`gauss_log`)
-    composed with the coning term (see the module docstring).
+    composed with the coning term (see the module docstring); and its derivative (T-1, 3, k) in ``theta``.
 
     Raises:
         SpaceIdInputError: a log of fewer than 2 samples.
     """
     if log.n_samples < 2:
         raise SpaceIdInputError(f"attitude integration: the log has {log.n_samples} sample(s), at least 2 are needed")
+    theta = np.asarray(theta, dtype=float)
     dt = np.diff(np.asarray(log.t_s, dtype=float))[:, None]
-    nodes = model.problem(gauss_log(log)).base_rate(np.atleast_2d(np.asarray(theta, dtype=float)), count=False)[0]
+    problem = model.problem(gauss_log(log))
+    nodes = problem.base_rate(theta[None], count=False)[0, 1:]
     w1, w2 = nodes[0::2], nodes[1::2]
-    return 0.5 * dt * (w1 + w2) + (math.sqrt(3.0) / 12.0) * dt**2 * np.cross(w1, w2)
+    increments = 0.5 * dt * (w1 + w2) + CONING * dt**2 * np.cross(w1, w2)
+    # d/dtheta: the nodes' rate Jacobians, the coning term's by the product rule
+    jac = problem.base_rate_jacobian(theta, count=False).reshape(len(nodes) + 1, 3, -1)[1:]
+    j1, j2 = jac[0::2], jac[1::2]
+    coning = np.cross(j1, w2[:, :, None], axis=1) + np.cross(w1[:, :, None], j2, axis=1)
+    return increments, 0.5 * dt[:, :, None] * (j1 + j2) + CONING * dt[:, :, None] ** 2 * coning
