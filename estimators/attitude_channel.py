@@ -375,10 +375,12 @@ class AttitudeChannel:
         jac = self.jacobian(theta, noise)
         return jac.T @ jac
 
-    def estimate_noise(self, theta: FloatArray, start: AttitudeNoise | None = None) -> AttitudeNoise:
+    def estimate_noise(
+        self, theta: FloatArray, start: AttitudeNoise | None = None, only_from_start: bool = False
+    ) -> AttitudeNoise:
         """The error model fitted to the residual at ``theta`` (k,) by maximum likelihood (:func:`fit_attitude_noise`;
-        ``start``: a nearby fit's error model, tried as one more start)."""
-        return fit_attitude_noise(self._in_axes(self.differences(theta)), start)
+        ``start``: a nearby fit's error model, tried as one more start, or the only one with ``only_from_start``)."""
+        return fit_attitude_noise(self._in_axes(self.differences(theta)), start, only_from_start)
 
     def profile_chi2(self, theta: FloatArray, noise: AttitudeNoise, reference: AttitudeNoise) -> float:
         """``-2 log L`` of the residual at ``theta`` (k,) under ``noise``, less that of a white residual under

@@ -280,7 +280,9 @@ def _simplex_minimum(
     return sim[0].copy(), values[0]
 
 
-def fit_attitude_noise(differences: FloatArray, start: AttitudeNoise | None = None) -> AttitudeNoise:
+def fit_attitude_noise(
+    differences: FloatArray, start: AttitudeNoise | None = None, only_from_start: bool = False
+) -> AttitudeNoise:
     """Maximum-likelihood :class:`AttitudeNoise` of differenced attitude residuals (T-1, 3), rad, axis by axis.
 
     The variance's scale is profiled out in closed form (:func:`_negative_log_likelihood`), so Nelder-Mead searches
@@ -288,7 +290,12 @@ def fit_attitude_noise(differences: FloatArray, start: AttitudeNoise | None = No
     maximum, to 1e-4 in ``log L`` on six logs of every attitude source, with up to half the evaluations). Starts from the moments of a white error plus a random walk (lag-1
     autocovariance ``-sw^2``, variance ``2 sw^2 + snu^2``) with ``phi`` = 0.5, and from ``phi`` = 0.05 and 0.95; the
     best of the three. ``start``: an error model fitted to a nearby residual (another model's on the same log),
-    tried as a fourth start."""
+    tried as a fourth start; with ``only_from_start``, the only one (a polish of an optimum found at nearby unknowns).
+
+    Raises:
+        SpaceIdInputError: ``only_from_start`` without a ``start``."""
+    if only_from_start and start is None:
+        raise SpaceIdInputError("attitude noise: only_from_start needs a start")
     white, walk, correlation = [], [], []
     for axis, d in enumerate(np.ascontiguousarray(np.asarray(differences, dtype=float).T)):
         variance = float(d @ d) / len(d)
@@ -296,7 +303,7 @@ def fit_attitude_noise(differences: FloatArray, start: AttitudeNoise | None = No
         sw2 = min(max(-lag1, 0.01 * variance), 0.49 * variance)
         snu2 = max(variance - 2.0 * sw2, 0.01 * variance)
         share = _logit_share(sw2, snu2)
-        starts = [np.array([share, _logit(phi)]) for phi in (0.05, 0.5, 0.95)]
+        starts = [] if only_from_start else [np.array([share, _logit(phi)]) for phi in (0.05, 0.5, 0.95)]
         if start is not None:
             near_w2, near_r2 = start.white_std_rad[axis] ** 2, start.walk_std_rad[axis] ** 2
             starts.append(np.array([_logit_share(near_w2, near_r2), _logit(start.walk_correlation[axis])]))

@@ -235,8 +235,9 @@ def fit_model(
             noise = weights.attitude
         elif estimator is None:
             # refitted at the final fit: the profile likelihood at it; the error model of the refined fit's start,
-            # kept, left the baseline up to 17 units of -2 log L above its own profile, which candidates then gained
-            noise = channel.estimate_noise(theta, own.attitude)
+            # kept, left the baseline up to 17 units of -2 log L above its own profile, which candidates then gained.
+            # A polish from that error model, fitted from every start at the nearby unknowns the refinement began at
+            noise = channel.estimate_noise(theta, own.attitude, only_from_start=True)
         else:
             noise = channel.estimate_noise(theta, weights.attitude)
         whitened = channel.residuals(theta, noise)
