@@ -44,7 +44,7 @@ MAX_CORRELATION = 0.999
 
 @dataclass(frozen=True)
 class AttitudeNoise:
-    """The attitude residual's error model, per axis of the first sample's base frame (see the module docstring).
+    """The attitude residual's error model, per noise axis of the channel (see the module docstring).
 
     Attributes:
         white_std_rad: std of the attitude source's white error (3,), rad.
