@@ -397,6 +397,12 @@ class AttitudeChannel:
             self._cached = (noise, noise.factors(len(self._measured_steps)))
         return self._cached[1]
 
+    @property
+    def axes(self) -> FloatArray:
+        """The noise axes (3, 3), columns in the first sample's frame, in which the error model whitens (identity before
+        :meth:`set_reference`)."""
+        return np.eye(3) if self._axes is None else self._axes.copy()
+
     def _in_axes(self, steps: FloatArray) -> FloatArray:
         """``steps`` (..., 3), vectors in the first sample's frame, in the noise axes."""
         return steps if self._axes is None else steps @ self._axes

@@ -261,14 +261,16 @@ def _diagnose(
         # that residual several times the noise, and a gyro so underweighted left the candidates' fits, the missing
         # effect's own included, to the attitude channel (fuel errors of 8-42 Cramer-Rao std after naming a delay on
         # design logs at 100 Hz, docs/results.md)
-        weights = ChannelWeights(white_std, channel.estimate_noise(baseline.theta), channel.coupling, channel.reference)
+        weights = ChannelWeights(
+            white_std, channel.estimate_noise(baseline.theta), channel.coupling, channel.reference, channel.axes
+        )
         # the baseline refitted on both channels with its error model, twice: the second pass is what every candidate
         # gets from the baseline's state (a fit under its error model, the error model refitted, the fit refined), so
         # that no candidate gains from one more round of the alternation than the baseline had
         for _ in range(2):
             baseline = fit_model(model, log, starts=[baseline.theta], weights=weights, channel=channel, profile_noise=True)[0]
             assert baseline.attitude_noise is not None
-            weights = ChannelWeights(white_std, baseline.attitude_noise, channel.coupling, channel.reference)
+            weights = ChannelWeights(white_std, baseline.attitude_noise, channel.coupling, channel.reference, channel.axes)
         # the baseline's own error model weights every candidate's fit and is the reference of the log-determinants
         baseline.attitude_chi2 = channel.chi2(baseline.theta, weights.attitude)
     fits, variants_tried = [], 0

@@ -81,13 +81,18 @@ class ChannelWeights:
     #: the unknowns at which the channel takes its integration error out and finds its noise axes (the baseline's fit;
     #: :meth:`~estimators.attitude_channel.AttitudeChannel.of`), or None (the nominal)
     reference: FloatArray | None = None
+    #: the channel's noise axes (3, 3), columns in the first sample's frame, along which ``attitude`` gives its stds
+    #: (:func:`~estimators.attitude_channel.noise_axes`; reported, the channels find them again from ``reference``)
+    axes: FloatArray | None = None
 
     def to_dict(self) -> dict[str, Any]:
         coupling = None if self.coupling is None else self.coupling.to_dict()
         reference = None if self.reference is None else [float(v) for v in self.reference]
+        axes = None if self.axes is None else np.asarray(self.axes, dtype=float).T.tolist()
         return {
             "gyro_std_rad_s": self.gyro_std_rad_s,
             **self.attitude.to_dict(),
+            "attitude_noise_axes": axes,  # one row per noise axis, first sample's frame
             "attitude_coupling": coupling,
             "attitude_reference": reference,
         }
