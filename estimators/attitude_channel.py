@@ -175,23 +175,12 @@ def reference_theta(model: IdentificationModel, reference: FloatArray | None) ->
     return np.concatenate((reference, nominal[len(reference) :]))
 
 
-#: the fourth-order increments of each log per robot and reference (:func:`~estimators.attitude_integration.
-#: fourth_order_increments`), made once and shared by every model's channel on it (added effects off: the same)
-_INCREMENTS: weakref.WeakKeyDictionary[MeasurementLog, dict[tuple[Any, ...], tuple[FloatArray, FloatArray]]] = (
+#: the midpoint rule's error on each log per robot and reference, with its Jacobian
+#: (:meth:`AttitudeChannel.integration_error`), made once and shared by every model's channel on it (added effects off:
+#: the same)
+_ERRORS: weakref.WeakKeyDictionary[MeasurementLog, dict[tuple[Any, ...], tuple[FloatArray, FloatArray]]] = (
     weakref.WeakKeyDictionary()
 )
-
-
-def _shared_increments(
-    model: IdentificationModel, log: MeasurementLog, theta: FloatArray, n_reference: int
-) -> tuple[FloatArray, FloatArray]:
-    """:func:`~estimators.attitude_integration.fourth_order_increments` of ``log`` at ``theta``, made once per log,
-    robot and reference (its first ``n_reference`` unknowns; the rest are ``model``'s added effects, off)."""
-    increments = _INCREMENTS.setdefault(log, {})
-    key = (model.robot.name, model.parameters.names[:n_reference], theta[:n_reference].tobytes())
-    if key not in increments:
-        increments[key] = fourth_order_increments(model, log, theta)
-    return increments[key]
 
 
 def noise_axes(differences: FloatArray) -> FloatArray:
@@ -262,44 +251,58 @@ class AttitudeChannel:
         channel = cls(model.problem(_shared_midpoint_log(log)), log, coupling)
         theta = reference_theta(model, reference)
         n_reference = len(theta) if reference is None else len(reference)
-        increments, jacobian = _shared_increments(model, log, theta, n_reference)
         # carried to first order in the base's unknowns (the effects' at the reference as they are, added ones off)
-        channel.set_reference(theta, increments, jacobian[:, :, : getattr(model.parameters, "base", model.parameters).n_params])
+        n_base = getattr(model.parameters, "base", model.parameters).n_params
+        errors = _ERRORS.setdefault(log, {})
+        key = (model.robot.name, model.parameters.names[:n_reference], theta[:n_reference].tobytes())
+        if key not in errors:
+            errors[key] = channel.integration_error(theta, *fourth_order_increments(model, log, theta), n_base)
+        channel.set_reference(theta, *errors[key])
         channel.reference = theta[:n_reference].copy()
         return channel
 
-    def set_reference(self, theta: FloatArray, increments: FloatArray, jacobian: FloatArray) -> None:
-        """Take the midpoint rule's error out of every prediction, to first order about ``theta`` (k,): ``increments``
-        (T-1, 3) is the fourth-order rotation of each step there (body axes at the step's start), ``jacobian``
-        (T-1, 3, r) its derivative in the first ``r`` unknowns (the reference's; the rest, added effects, are off in the
-        correction). And whiten in the noise axes of the residual there (:func:`noise_axes`).
-
-        The error changes with the unknowns (a tenth of it over 5 kg of fuel on quick3), so it is carried to first order
-        in them: a fit far from the reference (a baseline that a missing effect pulled away) keeps it out."""
+    def integration_error(
+        self, theta: FloatArray, increments: FloatArray, jacobian: FloatArray, n_params: int
+    ) -> tuple[FloatArray, FloatArray]:
+        """The midpoint rule's error on each step at ``theta`` (k,), (T-1, 3), rad, first sample's axes, and its
+        derivative (T-1, 3, ``n_params``) in the first ``n_params`` unknowns: ``increments`` (T-1, 3) is the fourth-order
+        rotation of each step there (body axes at the step's start,
+        :func:`~estimators.attitude_integration.fourth_order_increments`), ``jacobian`` (T-1, 3, k) its derivative."""
+        theta = np.asarray(theta, dtype=float)
         increments, jacobian = np.asarray(increments, dtype=float), np.asarray(jacobian, dtype=float)
-        n_ref = jacobian.shape[2] if jacobian.ndim == 3 else -1
         if (
-            increments.shape != self._measured_steps.shape
-            or jacobian.shape[:2] != increments.shape
-            or not 0 < n_ref <= len(theta)
+            increments.shape != self._raw_steps.shape
+            or jacobian.shape != (*increments.shape, len(theta))
+            or not 0 < n_params <= len(theta)
             or not (np.all(np.isfinite(increments)) and np.all(np.isfinite(jacobian)))
         ):
             raise SpaceIdInputError(
-                f"attitude channel: increments expected {self._measured_steps.shape} and their Jacobian "
-                f"{(*self._measured_steps.shape, len(theta))} at most, finite; got {increments.shape}, {jacobian.shape}"
+                f"attitude channel: increments expected {self._raw_steps.shape} and their Jacobian "
+                f"{(*self._raw_steps.shape, len(theta))}, finite; got {increments.shape}, {jacobian.shape}"
             )
-        theta = np.asarray(theta, dtype=float)
         rates = self.problem.base_rate(theta[None], count=False)[0, 1:]
-        rate_jacobian = self.problem.base_rate_jacobian(theta, count=False).reshape(len(self.measured), 3, -1)[1:, :, :n_ref]
+        rate_jacobian = self.problem.base_rate_jacobian(theta, count=False).reshape(len(self.measured), 3, -1)[1:]
         relative = self._relative[:-1]
         error = np.einsum("tij,tj->ti", relative, increments) - np.einsum("tij,tj->ti", self._step_map, rates)
-        self._error_jacobian = np.einsum("tij,tjk->tik", relative, jacobian) - np.einsum(
-            "tij,tjk->tik", self._step_map, rate_jacobian
+        error_jacobian = np.einsum("tij,tjk->tik", relative, jacobian[:, :, :n_params]) - np.einsum(
+            "tij,tjk->tik", self._step_map, rate_jacobian[:, :, :n_params]
         )
-        # the midpoint rule's error at theta folded into the target: raw - error(theta) + J theta[:r], so that the
-        # differences add J theta[:r] at their own unknowns
-        self._measured_steps = self._raw_steps - error + np.einsum("tik,k->ti", self._error_jacobian, theta[:n_ref])
-        self._axes = None
+        return error, error_jacobian
+
+    def set_reference(self, theta: FloatArray, error: FloatArray, error_jacobian: FloatArray) -> None:
+        """Take the midpoint rule's error out of every prediction, to first order about ``theta`` (k,): ``error``
+        (T-1, 3) there and its derivative ``error_jacobian`` (T-1, 3, r) in the first ``r`` unknowns (the rest, added
+        effects, are off in it; :meth:`integration_error`). And whiten in the noise axes of the residual there
+        (:func:`noise_axes`).
+
+        The error changes with the unknowns (a tenth of it over 5 kg of fuel on quick3), so it is carried to first order
+        in them: a fit far from the reference (a baseline that a missing effect pulled away) keeps it out."""
+        theta = np.asarray(theta, dtype=float)
+        n_ref = error_jacobian.shape[2]
+        self._error_jacobian = error_jacobian
+        # the error at theta folded into the target: raw - error(theta) + J theta[:r], so that the differences add
+        # J theta[:r] at their own unknowns
+        self._measured_steps = self._raw_steps - error + np.einsum("tik,k->ti", error_jacobian, theta[:n_ref])
         self._cached = None
         self._axes = noise_axes(self.differences(theta))
 

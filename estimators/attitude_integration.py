@@ -39,29 +39,41 @@ from spaceid_gym.log import MeasurementLog
 GAUSS_NODES = (0.5 - math.sqrt(3.0) / 6.0, 0.5 + math.sqrt(3.0) / 6.0)
 
 
+def _resampled(
+    log: MeasurementLog, t_s: FloatArray, q_rad: FloatArray, dq_rad_s: FloatArray, omega_rad_s: FloatArray
+) -> MeasurementLog:
+    """The log's first sample as logged (the reference of the effect terms: momentum in the first sample's axes),
+    then samples at ``t_s`` with the joint motion and gyro given and the attitude interpolated on SO(3)."""
+    quat = log.quat_base_to_inertial_wxyz
+    if quat is None:
+        raise SpaceIdInputError("attitude channel: the log has no attitude quaternions (no star tracker)")
+    rotations = Rotation.from_quat(np.asarray(quat, dtype=float), scalar_first=True)
+    return MeasurementLog(
+        t_s=np.concatenate(([log.t_s[0]], t_s)),
+        q_rad=np.concatenate((log.q_rad[:1], q_rad)),
+        dq_rad_s=np.concatenate((log.dq_rad_s[:1], dq_rad_s)),
+        omega_base_body_rad_s=np.concatenate((log.omega_base_body_rad_s[:1], omega_rad_s)),
+        quat_base_to_inertial_wxyz=np.concatenate(
+            (np.asarray(quat[:1], dtype=float), Slerp(log.t_s, rotations)(t_s).as_quat(scalar_first=True))
+        ),
+    )
+
+
 def midpoint_log(log: MeasurementLog) -> MeasurementLog:
     """The log's steps as samples: sample 0 as logged, then sample ``j`` (1..T-1) at the midpoint of step ``j``.
 
     Midpoint samples carry ``t = (t_{j-1} + t_j) / 2``, joint angles ``(q_{j-1} + q_j) / 2``, joint rates from the
-    encoders ``(q_j - q_{j-1}) / dt_j``, the attitude interpolated on SO(3) and the mean gyro rate. Sample 0 keeps
-    the first sample's time and attitude, the reference of the effect terms (momentum in the first sample's axes).
+    encoders ``(q_j - q_{j-1}) / dt_j``, the attitude interpolated on SO(3) and the mean gyro rate (:func:`_resampled`).
     """
-    quat = log.quat_base_to_inertial_wxyz
-    if quat is None:
-        raise SpaceIdInputError("attitude channel: the log has no attitude quaternions (no star tracker)")
     t = np.asarray(log.t_s, dtype=float)
     q = np.asarray(log.q_rad, dtype=float)
-    dt = np.diff(t)
-    mid_t = 0.5 * (t[:-1] + t[1:])
-    rotations = Rotation.from_quat(np.asarray(quat, dtype=float), scalar_first=True)
-    mid_quat = Slerp(t, rotations)(mid_t).as_quat(scalar_first=True)
     omega = np.asarray(log.omega_base_body_rad_s, dtype=float)
-    return MeasurementLog(
-        t_s=np.concatenate(([t[0]], mid_t)),
-        q_rad=np.concatenate((q[:1], 0.5 * (q[:-1] + q[1:]))),
-        dq_rad_s=np.concatenate((log.dq_rad_s[:1], np.diff(q, axis=0) / dt[:, None])),
-        omega_base_body_rad_s=np.concatenate((omega[:1], 0.5 * (omega[:-1] + omega[1:]))),
-        quat_base_to_inertial_wxyz=np.concatenate((np.asarray(quat[:1], dtype=float), mid_quat)),
+    return _resampled(
+        log,
+        0.5 * (t[:-1] + t[1:]),
+        0.5 * (q[:-1] + q[1:]),
+        np.diff(q, axis=0) / np.diff(t)[:, None],
+        0.5 * (omega[:-1] + omega[1:]),
     )
 
 
@@ -77,11 +89,7 @@ def encoder_tangents(t_s: FloatArray, q_rad: FloatArray) -> FloatArray:
 def gauss_log(log: MeasurementLog) -> MeasurementLog:
     """The log's first sample as logged, then the joint motion at the two Gauss-Legendre nodes of each step (1 + 2(T-1)
     samples, node 1 then node 2 of each step): the cubic Hermite of the step through its two encoder samples with
-    :func:`encoder_tangents`, the attitude interpolated on SO(3) and the gyro linearly. Sample 0 is the reference of the
-    effect terms, as in :func:`midpoint_log`."""
-    quat = log.quat_base_to_inertial_wxyz
-    if quat is None:
-        raise SpaceIdInputError("attitude channel: the log has no attitude quaternions (no star tracker)")
+    :func:`encoder_tangents`, the gyro linearly and the attitude on SO(3) (:func:`_resampled`)."""
     t = np.asarray(log.t_s, dtype=float)
     q = np.asarray(log.q_rad, dtype=float)
     omega = np.asarray(log.omega_base_body_rad_s, dtype=float)
@@ -100,16 +108,7 @@ def gauss_log(log: MeasurementLog) -> MeasurementLog:
         dq_out[node::2] = (d00 * q[:-1] + d01 * q[1:]) / dt + d10 * m[:-1] + d11 * m[1:]
         omega_out[node::2] = (1.0 - s) * omega[:-1] + s * omega[1:]
         t_out[node::2] = t[:-1] + s * dt[:, 0]
-    rotations = Rotation.from_quat(np.asarray(quat, dtype=float), scalar_first=True)
-    return MeasurementLog(
-        t_s=np.concatenate(([t[0]], t_out)),
-        q_rad=np.concatenate((q[:1], q_out)),
-        dq_rad_s=np.concatenate((log.dq_rad_s[:1], dq_out)),
-        omega_base_body_rad_s=np.concatenate((omega[:1], omega_out)),
-        quat_base_to_inertial_wxyz=np.concatenate(
-            (np.asarray(quat[:1], dtype=float), Slerp(t, rotations)(t_out).as_quat(scalar_first=True))
-        ),
-    )
+    return _resampled(log, t_out, q_out, dq_out, omega_out)
 
 
 #: the coning term's factor of ``dt^2 w1 x w2`` for the two Gauss-Legendre nodes' rates ``w1, w2``

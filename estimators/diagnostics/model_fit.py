@@ -225,7 +225,8 @@ def fit_model(
             scores = [_joint_chi2(problem, channel, weights, x) for x in tried]
             theta = _joint_fit(problem, channel, weights, tried[int(np.argmin(scores))])
             if profile_noise:
-                own = replace(weights, attitude=channel.estimate_noise(theta, weights.attitude))
+                # the error model polished from the weights' to weigh the refinement (the score's own comes after it)
+                own = replace(weights, attitude=channel.estimate_noise(theta, weights.attitude, only_from_start=True))
                 theta = _joint_fit(problem, channel, own, theta)
         else:
             scores = [float(r @ r) for r in (problem.residuals(x, count=False) for x in results)]
@@ -239,10 +240,11 @@ def fit_model(
         if not profile_noise:
             noise = weights.attitude
         elif estimator is None:
-            # refitted at the final fit: the profile likelihood at it; the error model of the refined fit's start,
-            # kept, left the baseline up to 17 units of -2 log L above its own profile, which candidates then gained.
-            # A polish from that error model, fitted from every start at the nearby unknowns the refinement began at
-            noise = channel.estimate_noise(theta, own.attitude, only_from_start=True)
+            # refitted at the final fit from every start: the profile likelihood at it. The error model of the refined
+            # fit's start, kept, left the baseline up to 17 units of -2 log L above its own profile, which candidates
+            # then gained; a polish alone at this point stuck the baseline of 9615 at a wander of zero (where its
+            # correlation is flat) while candidates found 3.6e-9 rad, and a clean log was named a delay (LR 12.7)
+            noise = channel.estimate_noise(theta, own.attitude)
         else:
             noise = channel.estimate_noise(theta, weights.attitude)
         whitened = channel.residuals(theta, noise)
