@@ -368,10 +368,15 @@ class AttitudeChannel:
 
     def chi2s(self, thetas: FloatArray, noise: AttitudeNoise) -> FloatArray:
         """:meth:`chi2` of each row of ``thetas`` (P, k), the model evaluated once for all: (P,)."""
+        rows = self.residual_rows(thetas, noise)
+        return np.sum(rows * rows, axis=1)
+
+    def residual_rows(self, thetas: FloatArray, noise: AttitudeNoise) -> FloatArray:
+        """:meth:`residuals` of each row of ``thetas`` (P, k), the model evaluated once for all: (P, 3T-6)."""
         thetas = np.atleast_2d(np.asarray(thetas, dtype=float))
         differences = self._differences(thetas, self.problem.base_rate(thetas))
         factors = self._factors(noise)
-        return np.array([float(np.sum(noise.whiten(d, factors) ** 2)) for d in self._in_axes(differences)])
+        return np.array([noise.whiten(d, factors).ravel() for d in self._in_axes(differences)])
 
     def fisher(self, theta: FloatArray, noise: AttitudeNoise) -> FloatArray:
         """Fisher information (k, k) of the attitude source about ``theta`` (k,) under ``noise``."""

@@ -444,7 +444,8 @@ def _fit_candidate(
     n0 = len(baseline.theta)  # the model's own unknowns (base and effects already in it), then the candidate's
     grid += [np.concatenate((v.theta[:n0], s)) for v in other_variants for s in term.grid_from_variant(v.theta[n0:])]
     extended_channel = None if channel is None else AttitudeChannel.of(extended, log, channel.coupling, channel.reference)
-    starts = best_of_grid(problem, grid, extended_channel, weights)
+    nuisance = (np.concatenate((baseline.theta, term.nominal)), n0)
+    starts = best_of_grid(problem, grid, extended_channel, weights, nuisance)
     starts.append(np.concatenate((restart, term.starts(restart[:k_base])[0])))
     starts.append(np.concatenate((baseline.theta, term.nominal)))  # the baseline itself: the nested model's fit
     return fit_model(extended, log, starts=starts, effect=term.name, weights=weights, problem=problem, profile_noise=True)[0]
