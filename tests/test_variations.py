@@ -15,7 +15,8 @@ import pytest
 from suite_rows import diagnosed_row
 
 from estimators.diagnostics import matrix, suite
-from estimators.diagnostics.power import effect_dof, expected_power, non_centrality, power_of
+from estimators.diagnostics.diagnose import candidate_model
+from estimators.diagnostics.power import effect_dof, expected_power, non_centrality, power_of, separation, wins_bic
 from estimators.least_squares import LevenbergMarquardt
 from estimators.models.mass_effects import Slosh
 from estimators.problem import IdentificationModel
@@ -185,6 +186,41 @@ def test_the_expected_power_of_a_pendulum_slosh_is_that_of_the_pendulum() -> Non
     spring = {**truth, "hidden_effects": {k: v for k, v in truth["hidden_effects"].items() if k in Slosh.names}}
     assert non_centrality(model, "slosh", log, spring) > 3.0 * exact
     assert effect_dof(model, "slosh", truth) == 6 and effect_dof(model, "slosh", spring) == 3
+
+
+def test_the_separation_from_a_rival_is_what_the_rivals_best_fit_leaves() -> None:
+    """On a noise-free log of a gyro bias without attitude, the non-centrality against ``initial_momentum`` is the
+    chi-square the best fit of the fuel and a momentum (instead of the bias) leaves, to 5 %; against
+    ``external_torque`` likewise. Equal unknowns and nothing to tell them apart: the effect wins half the time."""
+    paper6 = load_robot("paper6")
+    fuel = np.array([40.0, 0.2, -0.1, 0.1])  # mdf kg, tank m
+    hidden = HiddenEffects(gyro_bias_rad_s=(2e-5, -1e-5, 1.5e-5))
+    excitation = FourierExcitation(paper6.n_joints, seed=2, base_frequency_hz=0.05, n_harmonics=10)
+    env = simulate_episode(
+        paper6, 20.0, fuel[0], fuel[1:], excitation, seed=2, sensors=SensorModel.noise_free(), hidden_effects=hidden
+    )
+    log = dataclasses.replace(env.measurement_log(), quat_base_to_inertial_wxyz=None)
+    sigma = 2e-6
+    truth = {
+        "fuel_consumed_kg": fuel[0],
+        "tank_position_m": tuple(fuel[1:]),
+        "hidden_effects": hidden.to_dict(),
+        "noise": {"gyro_std_rad_s": sigma},
+    }
+    model = IdentificationModel(paper6, "fuel")
+    rivals = ("initial_momentum", "external_torque")
+    found = separation(model, "gyro_bias", log, truth, rivals=rivals)
+    for rival in rivals:
+        problem = candidate_model(model, rival).problem(log)
+        start = np.concatenate((fuel, problem.parameters.terms[-1].nominal))
+        residual = problem.residuals(LevenbergMarquardt(max_iterations=100).polish(problem, start).theta, count=False)
+        exact = float(residual @ residual) / sigma**2
+        assert exact > 5.0  # the rival cannot absorb the bias
+        assert found[rival].non_centrality == pytest.approx(exact, rel=0.05)
+    assert wins_bic(0.0, 3, 3, 3000) == pytest.approx(0.5, abs=1e-3)
+    draws = np.random.default_rng(0)  # a Monte Carlo reference: a 4-unknown effect against a 3-unknown rival
+    x, y = draws.noncentral_chisquare(4, 6.0, 200_000), draws.chisquare(3, 200_000)
+    assert wins_bic(6.0, 4, 3, 3000) == pytest.approx(np.mean(x - y > np.log(3000)), abs=0.004)
 
 
 def _matrix_row(effect: str, seed: int, duration_s: float = 60.0, fixed: dict[str, Any] | None = None) -> dict[str, Any]:

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from estimators.diagnostics.diagnose import NO_MISSING_EFFECT
-from estimators.diagnostics.power import expected_power
+from estimators.diagnostics.power import expected_power, separation
 from estimators.diagnostics.suite import ERROR_VERDICT, SUITE_EFFECTS, diagnosed_cells, error_cells, write_run
 from estimators.problem import IdentificationModel
 from spaceid_gym.executors import ExecutorSpec, run_jobs
@@ -41,7 +41,9 @@ ELIGIBLE_POWER = 0.9
 def run_variation(case: VariationCase, duration_s: float = 60.0) -> dict[str, Any]:
     """Simulate the variation ``case`` (:func:`spaceid_gym.variations.simulate_variation`), compute the expected
     power of its effect's test, diagnose it as :func:`~estimators.diagnostics.suite.run_case` does; one row: the case's cells
-    (:func:`_variation_cells`), ``expected_power`` (NaN for a clean log), the verdict columns of
+    (:func:`_variation_cells`), ``expected_power`` (NaN for a clean log), ``nearest_rival`` and ``separation_power``
+    (the rival candidate the effect is least likely to beat, and that probability: :func:`~estimators.diagnostics.power.separation`;
+    empty and NaN for a clean log), the verdict columns of
     :func:`~estimators.diagnostics.suite.diagnosed_cells` and ``wall_time_s``. A log whose power or diagnosis raises gives a row with the verdict
     ``error`` (and the power when it was computed), as :func:`~estimators.diagnostics.suite.guarded_case`."""
     start = time.perf_counter()
@@ -51,6 +53,11 @@ def run_variation(case: VariationCase, duration_s: float = 60.0) -> dict[str, An
         model = IdentificationModel(env.robot, "fuel")
         clean = case.effect == NO_MISSING_EFFECT
         row["expected_power"] = math.nan if clean else expected_power(model, case.effect, env.measurement_log(), truth_of(env))
+        row["nearest_rival"], row["separation_power"] = "", math.nan
+        if not clean:
+            separations = separation(model, case.effect, env.measurement_log(), truth_of(env))
+            row["nearest_rival"] = min(separations, key=lambda rival: separations[rival].probability)
+            row["separation_power"] = separations[row["nearest_rival"]].probability
         row.update(diagnosed_cells(env, case.effect))
     except Exception as exc:  # recorded in the row and reported by the command, not hidden
         return {**row, **error_cells(exc)}
@@ -103,7 +110,9 @@ def summarise_matrix(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     :data:`ELIGIBLE_POWER` (a clean log: every one; a log whose power is unknown, not); ``correct``: eligible logs whose
     verdict names the hidden effect (clean logs: ``none``), ``correct_percent`` of the eligible (NaN without any);
     ``undecided``: eligible logs named wrongly but with the hidden effect among the verdict's rivals (the log hardly
-    tells them apart, :func:`~estimators.diagnostics.verdict.rivals`); ``rms_over_noise_after_mean`` over the correct
+    tells them apart, :func:`~estimators.diagnostics.verdict.rivals`); ``separable``: eligible logs whose
+    ``separation_power`` is at least :data:`ELIGIBLE_POWER` too (clean logs: every one), ``separable_correct`` the
+    correct among them; ``rms_over_noise_after_mean`` over the correct
     ones; ``wall_time_s_mean`` over the logs that ran."""
     out = []
     for effect in dict.fromkeys(r["effect"] for r in rows):
@@ -123,10 +132,18 @@ def _eligible(row: dict[str, Any]) -> bool:
     return row["effect"] == NO_MISSING_EFFECT or (power is not None and power >= ELIGIBLE_POWER)
 
 
+def _separable(row: dict[str, Any]) -> bool:
+    """Whether an eligible row's effect is told from its nearest rival with probability at least :data:`ELIGIBLE_POWER`
+    (a clean log: always; an unknown separation: not)."""
+    power = row.get("separation_power")
+    return row["effect"] == NO_MISSING_EFFECT or (power is not None and power >= ELIGIBLE_POWER)
+
+
 def _matrix_cell(effect: str, axis: str, value: str, rows: list[dict[str, Any]]) -> dict[str, Any]:
     """One entry of :func:`summarise_matrix`."""
     eligible = [r for r in rows if _eligible(r)]
     correct = [r for r in eligible if r["correct"]]
+    separable = [r for r in eligible if _separable(r)]
     ran = [r for r in rows if r["verdict"] != ERROR_VERDICT]
     return {
         "effect": effect,
@@ -137,6 +154,8 @@ def _matrix_cell(effect: str, axis: str, value: str, rows: list[dict[str, Any]])
         "correct": len(correct),
         "correct_percent": 100.0 * len(correct) / len(eligible) if eligible else math.nan,
         "undecided": sum(1 for r in eligible if not r["correct"] and r["effect"] in str(r.get("rivals", "")).split(";")),
+        "separable": len(separable),
+        "separable_correct": sum(1 for r in separable if r["correct"]),
         "rms_over_noise_after_mean": float(np.mean([r["rms_over_noise_after"] for r in correct])) if correct else math.nan,
         "rms_over_noise_after_max": float(np.max([r["rms_over_noise_after"] for r in correct])) if correct else math.nan,
         "fuel_z_rms_after": _fuel_z_rms(correct),
@@ -167,16 +186,18 @@ def matrix_markdown(summary: list[dict[str, Any]]) -> str:
     effects = list(dict.fromkeys(s["effect"] for s in summary))
     lines = [
         f"Eligible: expected power of the effect's test >= {ELIGIBLE_POWER:g} (clean logs: all); correct: the verdict "
-        "names the hidden effect (clean logs: none).",
+        "names the hidden effect (clean logs: none). Separable: eligible, and the effect beats its nearest rival "
+        f"candidate with probability >= {ELIGIBLE_POWER:g} (separation power).",
         "",
-        "| hidden effect | logs | eligible | correct | wrong, truth a rival | RMS/noise after: mean, max | fuel z RMS after "
-        "| s/log |",
-        "|---|---|---|---|---|---|---|---|",
+        "| hidden effect | logs | eligible | correct | wrong, truth a rival | correct where separable "
+        "| RMS/noise after: mean, max | fuel z RMS after | s/log |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for effect in effects:
         s = entries[(effect, "all", "all")]
         lines.append(
             f"| {effect} | {s['logs']} | {s['eligible']} | {_fraction_cell(s)} | {s['undecided']} | "
+            f"{s['separable_correct']}/{s['separable']} | "
             f"{s['rms_over_noise_after_mean']:.3f}, "
             f"{s['rms_over_noise_after_max']:.3f} | {s['fuel_z_rms_after']:.2f} | {s['wall_time_s_mean']:.1f} |"
         )

@@ -26,7 +26,7 @@ so its Bonferroni divides ``alpha`` over one test more than its candidates (:dat
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from scipy.stats import chi2, ncx2
@@ -35,6 +35,7 @@ from estimators.diagnostics.diagnose import CANDIDATE_VARIANTS, DEFAULT_CANDIDAT
 from estimators.diagnostics.model_fit import independent_attitude_channel
 from estimators.diagnostics.workflow import true_parameters
 from estimators.problem import IdentificationModel
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.log import MeasurementLog
 
@@ -87,11 +88,7 @@ def non_centrality(
     problem = model.problem(log)
     term = problem.parameters.terms[-1]
     k = problem.parameters.n_params - term.n_params
-    effect_off = term.nominal.copy()
-    for name in ONLY_WITH_EFFECT.get(effect, ()):
-        if name in term.names:
-            index = term.names.index(name)
-            effect_off[index] = theta[k + index]
+    effect_off = _effect_off(term, effect, theta[k:])
     fisher = problem.fisher(theta, float(gyro_std))
     # as diagnose: an attitude that follows this gyro's noise (a fused estimate) is compared given the gyro
     channel = independent_attitude_channel(model, log, theta, alpha).channel
@@ -101,6 +98,85 @@ def non_centrality(
     schur = fisher[k:, k:] - fisher[k:, :k] @ np.linalg.solve(fisher[:k, :k], fisher[:k, k:])
     shift = theta[k:] - effect_off
     return float(shift @ schur @ shift)
+
+
+class Separation(NamedTuple):
+    """The true effect against one rival (:func:`separation`): ``non_centrality`` ``lambda_R`` and ``probability``
+    that the effect's BIC is the lower."""
+
+    non_centrality: float
+    probability: float
+
+
+def separation(
+    model_without_effect: IdentificationModel,
+    effect: str,
+    log: MeasurementLog,
+    truth: dict[str, Any],
+    alpha: float = 0.01,
+    rivals: tuple[str, ...] | None = None,
+) -> dict[str, Separation]:
+    """Per rival candidate (default: every other of :data:`~estimators.diagnostics.diagnose.DEFAULT_CANDIDATES`), the
+    probability that the true ``effect`` wins the BIC comparison against it on ``log``: how often the log can tell
+    the two apart, where :func:`expected_power` says only how often it can tell the effect from no effect.
+
+    One model holds the fuel unknowns, the effect (at the truth) and every rival (off); its Fisher information at the
+    truth (gyro and attitude channel, as :func:`non_centrality`). Against rival ``R``, ``lambda_R = d^T S_R d`` with
+    ``S_R`` the Schur complement of the effect's block given the fuel unknowns AND ``R``'s (what of the effect's
+    signature neither the fuel nor ``R`` can absorb, to first order; unknowns the information does not see at the
+    truth, a rival slosh's frequency at zero mass, drop out by the pseudo-inverse). In the linear-Gaussian picture the
+    rival's chi-square exceeds the effect's by ``X - Y``, ``X`` non-central chi-square (``k_E`` dof, ``lambda_R``: the
+    effect's unknowns over the joint model's) and ``Y`` central chi-square (``k_R`` dof: the rival's over it), so the
+    probability is ``P(X - Y > (k_E - k_R) ln n)``, ``n`` the values both channels give. Local and linear: a rival
+    whose nonlinear unknowns (a slosh's frequency) could follow the effect only far from its nominal is judged at its
+    nominal, so against it the probability is an upper bound."""
+    names = rivals if rivals is not None else tuple(c for c in DEFAULT_CANDIDATES if c != effect)
+    model = candidate_model(model_without_effect, candidate_spec(effect, truth))
+    for rival in names:
+        model = candidate_model(model, rival)
+    theta = true_parameters(model, truth)
+    gyro_std = (truth.get("noise") or {}).get("gyro_std_rad_s")
+    if theta is None or gyro_std is None:
+        raise SpaceIdInputError("separation: needs the fuel state and the gyro noise (noise.gyro_std_rad_s) in the truth")
+    problem = model.problem(log)
+    fisher = problem.fisher(theta, float(gyro_std))
+    n_values = 3 * problem.n_samples
+    channel = independent_attitude_channel(model, log, theta, alpha).channel
+    if channel is not None:
+        fisher = fisher + channel.fisher(theta, channel.estimate_noise(theta))
+        n_values += channel.n_values
+    terms = problem.parameters.terms
+    k_base = problem.parameters.base.n_params
+    bounds = np.cumsum([k_base, *(t.n_params for t in terms)])
+    effect_index = np.arange(bounds[0], bounds[1])
+    base_index = np.arange(k_base)
+    shift = theta[effect_index] - _effect_off(terms[0], effect, theta[effect_index])
+    out = {}
+    for r, rival in enumerate(names):
+        rival_index = np.arange(bounds[r + 1], bounds[r + 2])
+        nuisance = np.concatenate((base_index, rival_index))
+        f_en = fisher[np.ix_(effect_index, nuisance)]
+        schur = fisher[np.ix_(effect_index, effect_index)] - f_en @ np.linalg.pinv(fisher[np.ix_(nuisance, nuisance)]) @ f_en.T
+        lam = float(shift @ schur @ shift)
+        out[rival] = Separation(lam, wins_bic(lam, len(effect_index), len(rival_index), n_values))
+    return out
+
+
+def _effect_off(term: Any, effect: str, truth_part: FloatArray) -> FloatArray:
+    """The term's nominal (off) with the unknowns of :data:`ONLY_WITH_EFFECT` at their true values ``truth_part``."""
+    off = term.nominal.copy()
+    for name in ONLY_WITH_EFFECT.get(effect, ()):
+        if name in term.names:
+            off[term.names.index(name)] = truth_part[term.names.index(name)]
+    return off
+
+
+def wins_bic(lam: float, k_effect: int, k_rival: int, n_values: int) -> float:
+    """``P(X - Y > (k_effect - k_rival) ln n_values)``, ``X ~ ncx2(k_effect, lam)``, ``Y ~ chi2(k_rival)``, by
+    quadrature over ``Y`` (see :func:`separation`)."""
+    margin = (k_effect - k_rival) * np.log(n_values)
+    y = chi2.ppf(np.linspace(0.0, 1.0, 2001)[1:-1], k_rival)  # the rival's chi-square at its quantiles
+    return float(np.mean(ncx2.sf(margin + y, k_effect, max(lam, 0.0))))
 
 
 def power_of(lam: float, dof: int, alpha: float = 0.01, n_candidates: int = N_TESTS) -> float:
