@@ -9,6 +9,7 @@ import pinocchio as pin
 import pytest
 
 from estimators.base import Estimator, SearchResult
+from estimators.least_squares import LevenbergMarquardt
 from estimators.problem import IdentificationModel
 from estimators.registry import available_estimators, make_estimator, register_estimator
 from spaceid_gym.datasets import simulate_episode
@@ -17,7 +18,8 @@ from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.excitation import FourierExcitation
 from spaceid_gym.log import MeasurementLog
 from spaceid_gym.physics.inertia import RigidBodyInertia, transform_params10
-from spaceid_gym.robots import Robot
+from spaceid_gym.robots import Robot, load_robot
+from spaceid_gym.sim.sensors import SensorModel
 
 PAYLOAD = RigidBodyInertia(25.0, np.array([0.1, -0.05, 0.3]), np.diag([0.8, 0.6, 0.5]))
 
@@ -181,3 +183,22 @@ def test_registry_and_protocol(short_fuel_episode) -> None:
     model = IdentificationModel(short_fuel_episode.robot, "fuel")
     with pytest.raises(SpaceIdInputError, match="1001 samples is shorter than the estimator 'nominal-test' needs"):
         estimator.fit(model, short_fuel_episode.log)
+
+
+def test_a_fit_with_the_tank_mirrored_is_a_local_minimum_its_mirror_images_leave() -> None:
+    """Noise-free paper6 log, tank at x = -0.3 m: a local fit started with the tank mirrored along x stops in another
+    basin (tank at the box's x bound, the fuel a third of the truth's, cost far above zero); a local fit from one of
+    that point's mirror images (:meth:`~estimators.parameters.FuelParameters.mirror_images`) reaches the truth."""
+    robot = load_robot("paper6")
+    fuel = np.array([20.0, -0.3, 0.1, 0.1])  # mdf kg, tank m
+    excitation = FourierExcitation(robot.n_joints, seed=3, base_frequency_hz=0.05, n_harmonics=10)
+    env = simulate_episode(robot, 20.0, fuel[0], fuel[1:], excitation, seed=3, sensors=SensorModel.noise_free())
+    problem = IdentificationModel(robot, "fuel").problem(env.measurement_log())
+    polish = LevenbergMarquardt(max_iterations=200)
+    images = problem.parameters.mirror_images(fuel)
+    assert len(images) == 7 and np.allclose(images[0], [20.0, 0.3, 0.1, 0.1])
+    stuck = polish.polish(problem, images[0]).theta
+    assert abs(stuck[0] - fuel[0]) > 5.0 and problem.cost(stuck, count=False)[0] > 1e-12
+    refits = [polish.polish(problem, image).theta for image in problem.parameters.mirror_images(stuck)]
+    best = min(refits, key=lambda theta: problem.cost(theta, count=False)[0])
+    assert np.allclose(best, fuel, atol=1e-6)
