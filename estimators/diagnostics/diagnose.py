@@ -370,11 +370,20 @@ def _better_of_refit(
     channel: AttitudeChannel | None,
     problem: IdentificationProblem,
 ) -> ModelFit:
-    """``fit`` (of ``extended``, ``problem`` its problem on ``log``) fitted again from ``starts``: the better of the two
-    by the chi-square at ``white_std`` (rad/s), with the time of both."""
+    """``fit`` (of ``extended``, ``problem`` its problem on ``log``) fitted again from ``starts``, each distinct minimum
+    they reach refined on both channels (``each_basin``): the better of the two by the chi-square at ``white_std``
+    (rad/s), with the time of both."""
     ext_channel = None if channel is None else AttitudeChannel.of(extended, log, channel.coupling, channel.reference)
     refit = fit_model(
-        extended, log, starts=starts, effect=fit.effect, weights=weights, channel=ext_channel, problem=problem, profile_noise=True
+        extended,
+        log,
+        starts=starts,
+        effect=fit.effect,
+        weights=weights,
+        channel=ext_channel,
+        problem=problem,
+        profile_noise=True,
+        each_basin=True,
     )[0]
     better = refit if _chi2(refit, white_std * white_std) < _chi2(fit, white_std * white_std) else fit
     better.wall_time_s = fit.wall_time_s + refit.wall_time_s
