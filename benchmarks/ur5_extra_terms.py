@@ -41,6 +41,10 @@ less than their Coulomb level below 0.1-0.3 rad/s), each in addition to the mode
 * ``wide_onset_V``: ``tanh(dq_j / V)`` with ``V`` 0.1, 0.2, 0.3 or 0.5 rad/s, a wide Coulomb onset next to the narrow
   one; ``wide_onset_inner_cv``: ``V`` chosen among those by the inner leave-one-out.
 
+Presliding (hysteretic) friction, the Dahl model, **in place of** the model's Coulomb columns: ``dahl``, each
+joint's presliding length chosen per fold by the training cost; ``dahl_per_joint``, the same where the training cost
+prefers it to the model's Coulomb column (``ur5_presliding.py``, whose docstring says how).
+
 ``s`` is the model's smooth sign. Weights: Gautier's two-step per-joint weights (the std of each joint's OLS
 residual). Printed per candidate: the mean held-out error over the folds (``100 ||e|| / ||tau||`` over all joints, as
 ``arm cross-validate``), each fold's and each joint's mean.
@@ -63,6 +67,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from ur5_colony_vs_sdp import UNDISTURBED
+from ur5_presliding import DAHL_CANDIDATES, dahl_fit, presliding_columns, report_levels
 
 from estimators.arm.controller_model import ControllerModelRows, load_controller_rows
 from estimators.arm.identification import Preparation, load_movements
@@ -119,7 +124,7 @@ LOAD_COLUMN_NAMES = {
     "load_gain": ("gain",),
     "load_friction_gain": ("both", "gain"),
 }
-ALL_CANDIDATES = (*CANDIDATES, *SPEED_CANDIDATES, *INNER_CV_CANDIDATES, *LOAD_CANDIDATES)
+ALL_CANDIDATES = (*CANDIDATES, *SPEED_CANDIDATES, *INNER_CV_CANDIDATES, *LOAD_CANDIDATES, *DAHL_CANDIDATES)
 
 
 def features(model: ArmIdentificationModel, log: ArmLog, candidate: str, load: FloatArray | None = None) -> list[FloatArray]:
@@ -245,9 +250,41 @@ class OursScreen:
     """The identification model with a candidate's columns, two-step WLS, on the prepared rows of every movement."""
 
     label = "ours (wls)"
+    joints_apart = False
 
     def __init__(self, model: ArmIdentificationModel, rows: dict[str, IdentificationRows]) -> None:
         self.model, self.rows = model, rows
+        self.presliding: dict[str, FloatArray] = {}  # the Dahl columns by movement (ur5_presliding.py)
+
+    def effort(self, name: str) -> FloatArray:
+        """(T, n) the prepared effort of movement ``name``."""
+        return self.rows[name].log.effort
+
+    def design(self, name: str) -> FloatArray:
+        """(T, n, r) the model's regressor of movement ``name``."""
+        return self.rows[name].regressor
+
+    def coulomb_slots(self) -> FloatArray:
+        """(n, c) per joint its Coulomb columns in :meth:`design` (one, or one per direction; never regrouped)."""
+        names = list(self.model.base.names)
+        columns = [c for c in self.model.regressor.friction.columns if c.startswith("coulomb")]
+        return np.array([[names.index(f"joint{j + 1}_{c}_Nm") for c in columns] for j in range(self.model.n_joints)])
+
+    def column_scale(self, name: str) -> FloatArray:
+        """(n,) the model's unit of a friction column (effort per N m)."""
+        return 1.0 / self.model.torque_per_effort(self.rows[name].log.effort_kind)
+
+    def solve(self, design: FloatArray, effort: FloatArray) -> FloatArray:
+        """The parameters of ``design`` (T, n, k) on ``effort`` (T, n), two-step WLS."""
+        return two_step_wls(design, effort)
+
+    def predict(self, design: FloatArray, theta: FloatArray) -> FloatArray:
+        """(T, n) the prediction of ``theta`` with ``design``."""
+        return design @ theta
+
+    def levels(self, theta: FloatArray) -> FloatArray:
+        """(n, c) the fitted Coulomb (or Dahl) levels, N m."""
+        return theta[self.coulomb_slots()]
 
     def fit(self, train: Sequence[str], candidate: str) -> tuple[FloatArray, int]:
         """The parameters on the ``train`` movements and the fixed point's iterations."""
@@ -274,22 +311,51 @@ class UrScreen:
     """UR's refitted model (``estimators.arm.controller_model``) with a candidate's columns, per-joint least squares."""
 
     label = "UR's refitted"
+    joints_apart = True
 
     def __init__(self, model: ArmIdentificationModel, rows: dict[str, ControllerModelRows]) -> None:
         self.model, self.rows = model, rows
         self.n_base = next(iter(rows.values())).features.shape[2]
+        self.presliding: dict[str, FloatArray] = {}  # the Dahl columns by movement (ur5_presliding.py)
+
+    def effort(self, name: str) -> FloatArray:
+        """(T, n) the prepared current of movement ``name``."""
+        return self.rows[name].log.effort
+
+    def design(self, name: str) -> FloatArray:
+        """(T, n, 1 + k) the refitted model's per-joint columns of movement ``name``."""
+        return self.rows[name].features
+
+    def coulomb_slots(self) -> FloatArray:
+        """(n, c) per joint its Coulomb columns in :meth:`design`."""
+        columns = self.model.regressor.friction.columns
+        return np.tile([1 + i for i, c in enumerate(columns) if c.startswith("coulomb")], (self.model.n_joints, 1))
+
+    def column_scale(self, name: str) -> FloatArray:
+        """(n,) ones: the refitted model's friction is in the current's unit."""
+        return np.ones(self.model.n_joints)
+
+    def solve(self, design: FloatArray, effort: FloatArray) -> FloatArray:
+        """Per joint the least-squares coefficients (n, k) of ``design`` (T, n, k) on ``effort`` (T, n)."""
+        return np.stack([np.linalg.lstsq(design[:, j, :], effort[:, j], rcond=None)[0] for j in range(effort.shape[1])])
+
+    def predict(self, design: FloatArray, theta: FloatArray) -> FloatArray:
+        """(T, n) the prediction of the coefficients ``theta`` (n, k) with ``design``."""
+        return np.einsum("tjk,jk->tj", design, theta)
+
+    def levels(self, theta: FloatArray) -> FloatArray:
+        """(n, c) the fitted Coulomb (or Dahl) levels, A."""
+        return np.take_along_axis(theta, self.coulomb_slots(), axis=1)
 
     def fit(self, train: Sequence[str], candidate: str) -> tuple[FloatArray, int]:
         """Per joint the coefficients (n, 1 + k + m) on the ``train`` movements."""
         design = np.concatenate([ur_design(self.model, self.rows[name], candidate) for name in train])
-        current = np.concatenate([self.rows[name].log.effort for name in train])
-        joints = range(current.shape[1])
-        return np.stack([np.linalg.lstsq(design[:, j, :], current[:, j], rcond=None)[0] for j in joints]), 0
+        return self.solve(design, np.concatenate([self.effort(name) for name in train])), 0
 
     def error(self, theta: FloatArray, held: str, candidate: str) -> tuple[float, FloatArray]:
         """The held-out error of the coefficients ``theta`` on ``held``."""
         item = self.rows[held]
-        return relative_error(item.log.effort, np.einsum("tjk,jk->tj", ur_design(self.model, item, candidate), theta))
+        return relative_error(item.log.effort, self.predict(ur_design(self.model, item, candidate), theta))
 
     def extra(self, theta: FloatArray) -> FloatArray:
         """(m, n) the candidate's fitted coefficients, one row per feature."""
@@ -317,6 +383,10 @@ def held_out(screen: Screen, names: Sequence[str], candidate: str) -> list[Fold]
     folds = []
     for held in names:
         train = [name for name in names if name != held]
+        if candidate in DAHL_CANDIDATES:
+            theta, predicted, lengths = dahl_fit(screen, train, held, candidate)
+            folds.append(Fold(*relative_error(screen.effort(held), predicted), theta, 0, lengths))
+            continue
         chosen = inner_choice(screen, train, INNER_CV_CANDIDATES[candidate]) if candidate in INNER_CV_CANDIDATES else candidate
         theta, iterations = screen.fit(train, chosen)
         folds.append(Fold(*screen.error(theta, held, chosen), theta, iterations, chosen))
@@ -378,6 +448,8 @@ def report(screen: Screen, candidate: str, folds: list[Fold], baseline: list[Fol
     )
     if candidate in INNER_CV_CANDIDATES:
         print(f"    inner leave-one-out's choice per fold: {' '.join(fold.chosen for fold in folds)}")
+    if candidate in DAHL_CANDIDATES:
+        report_levels(screen, [f.chosen for f in folds], [f.theta for f in folds], [f.theta for f in baseline])
     if candidate in SPEED_CANDIDATES or candidate in INNER_CV_CANDIDATES:
         extra = np.array([screen.extra(fold.theta) for fold in folds])  # (F, m, n)
         for k in range(extra.shape[1]):
@@ -394,6 +466,24 @@ def report(screen: Screen, candidate: str, folds: list[Fold], baseline: list[Fol
         print(f"    fixed-point iterations per fold: {' '.join(str(fold.iterations) for fold in folds)}", flush=True)
 
 
+def real_setup(
+    parser: argparse.ArgumentParser, args: argparse.Namespace
+) -> tuple[ArmIdentificationModel, Preparation, dict[str, ArmLog]]:
+    """The model of ``args.friction`` with armature, the signal chain and the 7 undisturbed movements of ``args.data``."""
+    try:
+        friction = parse_friction(args.friction)
+    except SpaceIdInputError as exc:
+        parser.error(str(exc))
+    model = ArmIdentificationModel.build(load_arm("ur5"), friction, armature=True)
+    return model, Preparation(), load_movements(args.data, UNDISTURBED)
+
+
+def ur_screen(model: ArmIdentificationModel, data: str, logs: dict[str, ArmLog], preparation: Preparation) -> UrScreen:
+    """UR's refitted model with the model's friction terms and an offset, on the movements ``logs`` of ``data``."""
+    friction = FrictionModel((*model.regressor.friction.terms, "offset"), model.regressor.friction.coulomb_smoothing_rad_s)
+    return UrScreen(model, load_controller_rows(data, logs, preparation, friction))
+
+
 def main() -> None:
     """One line per candidate."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -408,20 +498,17 @@ def main() -> None:
     unknown = [name for name in candidates if name not in ALL_CANDIDATES]
     if unknown:
         parser.error(f"--candidates: unknown {unknown}; expected some of {list(ALL_CANDIDATES)}")
-    try:
-        friction = parse_friction(args.friction)
-    except SpaceIdInputError as exc:
-        parser.error(str(exc))
-    model = ArmIdentificationModel.build(load_arm("ur5"), friction, armature=True)
-    preparation = Preparation()
-    logs = load_movements(args.data, UNDISTURBED)
+    model, preparation, logs = real_setup(parser, args)
     screens: list[Screen] = [OursScreen(model, preparation.all_rows(model, logs))]
     if args.ur_model:
-        ur_friction = FrictionModel((*model.regressor.friction.terms, "offset"), model.regressor.friction.coulomb_smoothing_rad_s)
-        screens.append(UrScreen(model, load_controller_rows(args.data, logs, preparation, ur_friction)))
+        screens.append(ur_screen(model, args.data, logs, preparation))
+    if set(DAHL_CANDIDATES) & set(candidates):
+        columns = {name: presliding_columns(model, log, preparation) for name, log in logs.items()}
+        for screen in screens:
+            screen.presliding = columns
     names = list(logs)
     top_speed = np.max([np.abs(item.log.dq_rad_s).max(axis=0) for item in screens[0].rows.values()], axis=0)
-    print(f"model: {','.join(friction)} + armature; folds (held out): {', '.join(names)}")
+    print(f"model: {','.join(model.regressor.friction.terms)} + armature; folds (held out): {', '.join(names)}")
     for screen in screens:
         print(f"\n{screen.label}")
         baseline = held_out(screen, names, "none")
