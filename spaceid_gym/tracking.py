@@ -76,7 +76,7 @@ from scipy.stats import t as t_dist
 
 from estimators.estimate import Estimate
 from estimators.evaluation import estimator_from_spec
-from estimators.fuel_posterior import fuel_posterior
+from estimators.fuel_posterior import FuelPaths, expected_nees
 from estimators.problem import IdentificationModel, IdentificationProblem
 from estimators.ukf import UKFTracker, UnscentedKalman
 from spaceid_gym.arrays import FloatArray
@@ -107,6 +107,15 @@ NIS_FALSE_ALARM = 1e-4
 #: the innovations' dimension (the gyro's 3 axes)
 INNOVATION_DOF = 3
 
+#: the unknowns of the fuel problem (fuel consumed, tank x, y, z): a consistent window's NEES is chi-square(4)
+UNKNOWNS = 4
+
+#: the hand-over test's bound on the filter's mean NEES under the exact posterior (module docstring): chi-square(4)'s
+#: mean 4 plus 0.5, 2.5 times the statistic's Monte Carlo std at the paths' 200 effective draws (about
+#: ``sqrt(2 x 4 / 200) = 0.2``), so a filter that agrees is handed over with ~99 % probability, and a hand-over adds at
+#: most 12 % to a window's NEES (the 30-mission per-window band allows +27 %)
+HANDOVER_NEES = UNKNOWNS + 0.5
+
 
 @dataclass(frozen=True)
 class MissionWindow:
@@ -136,33 +145,40 @@ def simulate_mission(robot_name: str, windows: int, seed: int, duration_s: float
     return out
 
 
+def burn_rms_kg(robot_name: str, schedule: FuelSchedule | None = None) -> float:
+    """The std of the random walk's fuel step over one gap, kg: the RMS of the schedule's step (module docstring)."""
+    schedule = schedule or FuelSchedule()
+    return math.hypot(schedule.mean_step_fraction, schedule.std_step_fraction) * load_robot(robot_name).base_full.mass_kg
+
+
 def mission_random_walk(robot_name: str, gap_s: float, schedule: FuelSchedule | None = None) -> FloatArray:
     """The tracker's random walk (4,) for a gap of ``gap_s`` s between windows (see the module docstring)."""
-    robot = load_robot(robot_name)
-    schedule = schedule or FuelSchedule()
-    model = IdentificationModel(robot, "fuel")
-    burn_rms_kg = math.hypot(schedule.mean_step_fraction, schedule.std_step_fraction) * robot.base_full.mass_kg
-    return np.array([burn_rms_kg / (model.parameters.scale[0] * math.sqrt(gap_s)), 0.0, 0.0, 0.0])
+    model = IdentificationModel(load_robot(robot_name), "fuel")
+    step_kg = burn_rms_kg(robot_name, schedule)
+    return np.array([step_kg / (model.parameters.scale[0] * math.sqrt(gap_s)), 0.0, 0.0, 0.0])
 
 
 def first_window_tracker(
     ukf: UnscentedKalman, problem: IdentificationProblem, first_window: str, seed: int
-) -> tuple[UKFTracker, Estimate | None]:
+) -> tuple[UKFTracker, Estimate | None, FuelPaths | None]:
     """The tracker after the mission's first window (module docstring): ``posterior`` starts it at the posterior mean
-    and covariance around ``hybrid``'s fit (returned too) under the physical prior, draws seeded by ``seed``;
-    ``batch`` at the fit with its Cramér-Rao covariance; ``ukf`` runs the estimator's own fit."""
+    and covariance around ``hybrid``'s fit (returned too) under the physical prior, draws seeded by ``seed``, and
+    returns the posterior's importance-sampled paths, carried on until the hand-over; ``batch`` at the fit with its
+    Cramér-Rao covariance; ``ukf`` runs the estimator's own fit."""
     if first_window == "ukf":
-        return ukf.fitted_tracker(problem, np.random.default_rng(seed)), None
+        return ukf.fitted_tracker(problem, np.random.default_rng(seed)), None, None
     fitted = estimator_from_spec("hybrid", seed=seed).fit_problem(problem)
     noise = problem.noise_std(fitted.theta)[0]
+    paths = None
     if first_window == "posterior":
-        posterior = fuel_posterior(problem, fitted.theta, noise, np.random.default_rng(seed))
+        paths = FuelPaths(problem, fitted.theta, noise, np.random.default_rng(seed))
+        posterior = paths.posterior()
         x0, cov = posterior.mean, posterior.covariance
     else:
         x0, cov = fitted.theta, np.linalg.inv(problem.fisher(fitted.theta, noise))
     tracker = ukf.tracker(problem, x0, 0.5 * (cov + cov.T))
     tracker.set_noise(noise)
-    return tracker, fitted
+    return tracker, fitted, paths
 
 
 def track_mission(
@@ -183,19 +199,23 @@ def track_mission(
     robot = load_robot(robot_name)
     model = IdentificationModel(robot, "fuel")
     walk = mission_random_walk(robot_name, gap_s)
+    step_kg = burn_rms_kg(robot_name)
     hybrid = estimator_from_spec("hybrid", seed=seed)
     rows: list[dict[str, Any]] = []
     samples: list[dict[str, Any]] = []
     tracker = None
+    paths = None  # the exact posterior's paths while the filter is not yet handed the mission (module docstring)
     reinit = "posterior" if first_window == "ukf" else first_window
     noise_dof = 0  # the degrees of freedom of the previous window's residual noise, set after each window
     for window in windows:
         start = time.perf_counter()
         problem = model.problem(window.log)
         fitted = None
-        alarm_nis = math.nan
+        alarm_nis = handover = effective = math.nan
+        regularised = 0
         if tracker is None:
-            tracker, fitted = first_window_tracker(ukf, problem, first_window, seed)
+            tracker, fitted, paths = first_window_tracker(ukf, problem, first_window, seed)
+            exact = paths is not None
             noise = tracker.noise_std_rad_s
             tracker.random_walk = walk.copy()
             nis = math.nan
@@ -221,9 +241,18 @@ def track_mission(
             nis = float(np.mean(tracker.nis[first_update:]))
             if nis > nis_alarm_bound(problem.n_samples, noise_dof):
                 alarm_nis = nis  # diverged: restart from this window's batch fit, nothing carried over
-                tracker, fitted = first_window_tracker(ukf, problem, reinit, seed)
+                tracker, fitted, paths = first_window_tracker(ukf, problem, reinit, seed)
                 tracker.random_walk = walk.copy()
                 noise, nis = tracker.noise_std_rad_s, math.nan
+                exact = paths is not None
+            elif exact := paths is not None:
+                paths.extend(problem, noise, step_kg, tracker.estimate())  # the window's exact posterior
+                posterior = paths.posterior()
+                effective, regularised = posterior.effective_samples, int(paths.regularised)
+                handover = expected_nees(posterior, *tracker.estimate())
+                tracker.set_state(posterior.mean, posterior.covariance)
+                if handover <= HANDOVER_NEES:
+                    paths = None  # the filter's update agrees with the exact posterior: it runs on alone
         filter_s = time.perf_counter() - start
         x, cov = tracker.estimate()
         window_noise = noise
@@ -250,6 +279,10 @@ def track_mission(
                 "ukf_noise_std_rad_s": window_noise,
                 "ukf_wall_time_s": filter_s,
                 "reinitialised": int(not math.isnan(alarm_nis)),
+                "exact_posterior": int(exact),
+                "handover_nees": handover,
+                "exact_effective_samples": effective,
+                "exact_regularised": regularised,
                 "alarm_nis_mean": alarm_nis,
                 "hybrid_fuel_consumed_kg": float(fitted.theta[0]),
                 "hybrid_fuel_std_kg": float(fitted.theta_std[0]),
