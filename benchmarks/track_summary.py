@@ -42,7 +42,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from spaceid_gym.arrays import FloatArray
-from spaceid_gym.tracking import lag_correlation, lag_correlation_null, mean_bounds, run_average_nees, runs_mean_interval
+from spaceid_gym.track_statistics import lag_correlation, lag_correlation_null, mean_bounds, run_average_nees, runs_mean_interval
 
 #: unknowns of the fuel problem (fuel consumed, tank x, y, z): each window's NEES is chi-square(4) when consistent
 UNKNOWNS = 4
