@@ -23,16 +23,8 @@ import numpy as np
 
 from estimators.problem import IdentificationModel
 from spaceid_gym.robots import load_robot
-from spaceid_gym.tracking import (
-    DEFAULT_GAP_S,
-    _ukf,
-    first_window_tracker,
-    lag_correlation,
-    lag_correlation_null,
-    mean_bounds,
-    mission_random_walk,
-    simulate_mission,
-)
+from spaceid_gym.track_statistics import lag_correlation, lag_correlation_null, mean_bounds
+from spaceid_gym.tracking import DEFAULT_GAP_S, _ukf, first_window_tracker, mission_random_walk, simulate_mission
 
 #: the fuel problem's unknowns, in the filter's order
 UNKNOWNS = ("fuel", "tank x", "tank y", "tank z")
@@ -53,7 +45,7 @@ def main() -> None:
         for window in windows:
             problem = model.problem(window.log)
             if tracker is None:
-                tracker, _ = first_window_tracker(_ukf("ukf", seed), problem, args.first_window, seed)
+                tracker = first_window_tracker(_ukf("ukf", seed), problem, args.first_window, seed)
                 tracker.random_walk = mission_random_walk("paper6", DEFAULT_GAP_S)
                 noise = tracker.noise_std_rad_s
             else:

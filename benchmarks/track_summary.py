@@ -19,7 +19,9 @@ Then the NEES tests that hold for correlated windows, with the missions (indepen
 A window whose NEES passes chi-square(4)'s 99.9 % point is counted: a consistent filter has 0.1 % of them, whatever
 the correlation (each window's NEES is chi-square(4) on its own).
 
-The re-initialisations on a high window NIS (``spaceid_gym.tracking``), their count and where.
+The re-initialisations on a high window NIS (``spaceid_gym.tracking``), their count and where; the last window
+each mission kept the exact posterior before handing over to the filter, and how many windows were sampled afresh
+under the kernel prior.
 
 Pooled as before: the missions meeting the 1.5 x target, the missions consistent in NEES and NIS, the mean NIS
 over every streamed update against its 95 % bounds (innovations are white, so that test stands), and the mean
@@ -42,7 +44,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from spaceid_gym.arrays import FloatArray
-from spaceid_gym.tracking import lag_correlation, lag_correlation_null, mean_bounds, run_average_nees, runs_mean_interval
+from spaceid_gym.track_statistics import lag_correlation, lag_correlation_null, mean_bounds, run_average_nees, runs_mean_interval
 
 #: unknowns of the fuel problem (fuel consumed, tank x, y, z): each window's NEES is chi-square(4) when consistent
 UNKNOWNS = 4
@@ -105,6 +107,25 @@ def print_nees_tests(nees: FloatArray, seeds: list[int], rng: np.random.Generato
     )
 
 
+def print_handover(runs: list[dict[str, Any]]) -> None:
+    """How long each mission kept the exact posterior before handing over to the filter (``spaceid_gym.tracking``)."""
+    last = {}
+    regularised = 0
+    for run in runs:
+        exact = [w["window"] for w in run["windows"] if w.get("exact_posterior", 0)]
+        last[run["info"]["seed"]] = max(exact) if exact else None
+        regularised += sum(int(w.get("exact_regularised", 0)) for w in run["windows"])
+    if all(v is None for v in last.values()):
+        return
+    counts = {k: sum(1 for v in last.values() if v == k) for k in sorted({v for v in last.values() if v is not None})}
+    late = ", ".join(f"seed {seed} ({k})" for seed, k in last.items() if k is not None and k >= 2) or "none"
+    print(
+        "last window on the exact posterior (then the filter alone): "
+        + ", ".join(f"window {k}: {n} missions" for k, n in counts.items())
+        + f"; after window 1: {late}; windows sampled afresh under the kernel prior: {regularised}"
+    )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("folders", type=Path, nargs="+", help="output folders of spaceid track")
@@ -131,6 +152,7 @@ def main() -> None:
         f"NIS consistent in {sum(s['nis_consistent'] for s in summaries)}/{n} missions; pooled mean {nis:.4f} "
         f"(95 % bounds {low:.4f}-{high:.4f})"
     )
+    print_handover(runs)
     fired = {r["info"]["seed"]: r["summary"].get("reinitialised_windows", []) for r in runs}
     where = "; ".join(f"seed {seed}: windows {ws}" for seed, ws in fired.items() if ws) or "none"
     print(f"re-initialisations on a high window NIS: {sum(len(ws) for ws in fired.values())} ({where})")

@@ -121,6 +121,17 @@ def _next_row(x: FloatArray, rows: Any) -> FloatArray:
     return next(rows)
 
 
+def _covariance(name: str, value: FloatArray, k: int) -> FloatArray:
+    """``value`` as a symmetrised finite (k, k) positive definite covariance; raises naming ``name`` otherwise."""
+    cov = np.asarray(value, dtype=float)
+    if cov.shape != (k, k) or not np.all(np.isfinite(cov)):
+        raise SpaceIdInputError(f"{name}: expected a finite ({k}, {k}) covariance, got shape {cov.shape}")
+    cov = 0.5 * (cov + cov.T)
+    if np.linalg.eigvalsh(cov)[0] <= 0.0:
+        raise SpaceIdInputError(f"{name}: the covariance is not positive definite")
+    return cov
+
+
 class UKFTracker:
     """The streaming unscented Kalman filter on one problem at a time (see the module docstring).
 
@@ -157,12 +168,7 @@ class UKFTracker:
         if not np.all(np.isfinite(self.random_walk) & (self.random_walk >= 0.0)):
             raise SpaceIdInputError(f"random_walk: expected finite numbers >= 0, got {random_walk!r}")
         self.noise_std_rad_s = positive_option("noise_std_rad_s", noise_std_rad_s)
-        cov = np.asarray(P0, dtype=float)
-        if cov.shape != (k, k) or not np.all(np.isfinite(cov)):
-            raise SpaceIdInputError(f"P0: expected a finite ({k}, {k}) covariance, got shape {cov.shape}")
-        cov = 0.5 * (cov + cov.T)
-        if np.linalg.eigvalsh(cov)[0] <= 0.0:
-            raise SpaceIdInputError("P0: the initial covariance is not positive definite")
+        cov = _covariance("P0", P0, k)
         points = MerweScaledSigmaPoints(k, alpha=alpha, beta=beta, kappa=kappa)
         self.filter = UnscentedKalmanFilter(dim_x=k, dim_z=3, dt=0.0, hx=_next_row, fx=_same, points=points)
         self.filter.x = finite_vector("x0", x0, problem.parameters.names).copy()
@@ -189,6 +195,13 @@ class UKFTracker:
         """Use the gyro noise std ``noise_std_rad_s`` (rad/s per sample and axis) from the next update on."""
         self.noise_std_rad_s = positive_option("noise_std_rad_s", noise_std_rad_s)
         self.filter.R = np.eye(3) * self.noise_std_rad_s**2
+
+    def set_state(self, x: FloatArray, P: FloatArray) -> None:
+        """Continue from the state ``x`` (k,) with covariance ``P`` (k, k), symmetric positive definite (e.g. a posterior
+        computed outside the filter)."""
+        cov = _covariance("P", P, self.n_params)
+        self.filter.x = finite_vector("x", x, self.problem.parameters.names).copy()
+        self.filter.P = cov
 
     def bind(self, problem: IdentificationProblem) -> None:
         """Continue on ``problem`` (the next window of the same model): the state and covariance are kept; call

@@ -26,6 +26,20 @@ the filter, so the walk covers it), and nothing to the tank position (a tank doe
 ``random_walk = [burn_rms_kg / (scale_mdf sqrt(gap_s)), 0, 0, 0]`` in the tracker's units (fractions of the scale per
 square-root second; inside a 60 s window of a day's gap it adds 0.03 % of that variance).
 
+Until the hand-over (``--first-window posterior``): the first posterior can be wide and curved, and the filter's
+Gaussian update of the next window from its moments then over-counts (mission 241: 10.5 +- 7.1 kg after window 0,
+truth 27.5; the filter's pass over window 1 ended at 20.3 +- 5.1 kg against 44.3, NEES 125, where the exact
+posterior is 29.2 +- 7.5 kg; ``benchmarks/track_second_window.py``). So the tracker keeps the first window's
+importance-sampled paths (:class:`~estimators.fuel_posterior.FuelPaths`) and, after each later window, pushes them
+through the same random walk and weights them by the window's likelihood (the same identification model). The
+filter still streams the window (its NIS, the alarm test and ``samples.csv`` are its); then its state and
+covariance are set to the paths' posterior mean and covariance (the window's row: ``exact_posterior`` 1, with the
+paths' ``exact_effective_samples`` and ``exact_regularised`` when they were sampled afresh under the kernel prior).
+The hand-over test: the mean NEES the filter's own Gaussian after the window would have if the truth were drawn from
+the exact posterior, ``tr(P^-1 C) + d^T P^-1 d`` (``handover_nees``; 4 when they agree,
+:func:`~estimators.fuel_posterior.expected_nees`), at most :data:`HANDOVER_NEES`; from the next window on the filter
+runs alone. A NIS alarm re-initialises the paths with the filter.
+
 The filter's gyro noise ``R = sigma^2 I_3``: in each window the noise the previous window left, the RMS of that
 window's residual at the filter's state after it, ``sqrt(RSS / (3T - k))`` (:meth:`~estimators.problem.IdentificationProblem.noise_std`;
 in the first window ``hybrid``'s residual there; ``--first-window ukf``: the ``ukf`` estimator's noise, the gyro's
@@ -71,12 +85,11 @@ from typing import Any
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
-from scipy.stats import chi2, f
-from scipy.stats import t as t_dist
+from scipy.stats import f
 
 from estimators.estimate import Estimate
 from estimators.evaluation import estimator_from_spec
-from estimators.fuel_posterior import fuel_posterior
+from estimators.fuel_posterior import FuelPaths, expected_nees
 from estimators.problem import IdentificationModel, IdentificationProblem
 from estimators.ukf import UKFTracker, UnscentedKalman
 from spaceid_gym.arrays import FloatArray
@@ -88,6 +101,7 @@ from spaceid_gym.limits import check_count, check_log_size
 from spaceid_gym.log import MeasurementLog, write_bytes_atomic, write_csv_atomic, write_json_atomic
 from spaceid_gym.mission import FuelSchedule
 from spaceid_gym.robots import load_robot
+from spaceid_gym.track_statistics import mean_bounds
 
 #: the most windows one mission may have
 MAX_WINDOWS = 1000
@@ -98,14 +112,20 @@ DEFAULT_GAP_S = 86400.0
 #: how the filter takes the mission's first window (see the module docstring)
 FIRST_WINDOW = ("posterior", "batch", "ukf")
 
-#: the confidence of the consistency bounds
-LEVEL = 0.95
-
 #: the per-window false-alarm rate of the NIS fault test: 10 windows x hundreds of missions must see about none
 NIS_FALSE_ALARM = 1e-4
 
 #: the innovations' dimension (the gyro's 3 axes)
 INNOVATION_DOF = 3
+
+#: the unknowns of the fuel problem (fuel consumed, tank x, y, z): a consistent window's NEES is chi-square(4)
+UNKNOWNS = 4
+
+#: the hand-over test's bound on the filter's mean NEES under the exact posterior (module docstring): chi-square(4)'s
+#: mean 4 plus 0.5, 2.5 times the statistic's Monte Carlo std at the paths' 200 effective draws (about
+#: ``sqrt(2 x 4 / 200) = 0.2``), so a filter that agrees is handed over with ~99 % probability, and a hand-over adds at
+#: most 12 % to a window's NEES (the 30-mission per-window band allows +27 %)
+HANDOVER_NEES = UNKNOWNS + 0.5
 
 
 @dataclass(frozen=True)
@@ -136,33 +156,40 @@ def simulate_mission(robot_name: str, windows: int, seed: int, duration_s: float
     return out
 
 
+def burn_rms_kg(robot_name: str, schedule: FuelSchedule | None = None) -> float:
+    """The std of the random walk's fuel step over one gap, kg: the RMS of the schedule's step (module docstring)."""
+    schedule = schedule or FuelSchedule()
+    return math.hypot(schedule.mean_step_fraction, schedule.std_step_fraction) * load_robot(robot_name).base_full.mass_kg
+
+
 def mission_random_walk(robot_name: str, gap_s: float, schedule: FuelSchedule | None = None) -> FloatArray:
     """The tracker's random walk (4,) for a gap of ``gap_s`` s between windows (see the module docstring)."""
-    robot = load_robot(robot_name)
-    schedule = schedule or FuelSchedule()
-    model = IdentificationModel(robot, "fuel")
-    burn_rms_kg = math.hypot(schedule.mean_step_fraction, schedule.std_step_fraction) * robot.base_full.mass_kg
-    return np.array([burn_rms_kg / (model.parameters.scale[0] * math.sqrt(gap_s)), 0.0, 0.0, 0.0])
+    model = IdentificationModel(load_robot(robot_name), "fuel")
+    step_kg = burn_rms_kg(robot_name, schedule)
+    return np.array([step_kg / (model.parameters.scale[0] * math.sqrt(gap_s)), 0.0, 0.0, 0.0])
 
 
 def first_window_tracker(
     ukf: UnscentedKalman, problem: IdentificationProblem, first_window: str, seed: int
-) -> tuple[UKFTracker, Estimate | None]:
+) -> tuple[UKFTracker, Estimate | None, FuelPaths | None]:
     """The tracker after the mission's first window (module docstring): ``posterior`` starts it at the posterior mean
-    and covariance around ``hybrid``'s fit (returned too) under the physical prior, draws seeded by ``seed``;
-    ``batch`` at the fit with its Cramér-Rao covariance; ``ukf`` runs the estimator's own fit."""
+    and covariance around ``hybrid``'s fit (returned too) under the physical prior, draws seeded by ``seed``, and
+    returns the posterior's importance-sampled paths, carried on until the hand-over; ``batch`` at the fit with its
+    Cramér-Rao covariance; ``ukf`` runs the estimator's own fit."""
     if first_window == "ukf":
-        return ukf.fitted_tracker(problem, np.random.default_rng(seed)), None
+        return ukf.fitted_tracker(problem, np.random.default_rng(seed)), None, None
     fitted = estimator_from_spec("hybrid", seed=seed).fit_problem(problem)
     noise = problem.noise_std(fitted.theta)[0]
+    paths = None
     if first_window == "posterior":
-        posterior = fuel_posterior(problem, fitted.theta, noise, np.random.default_rng(seed))
+        paths = FuelPaths(problem, fitted.theta, noise, np.random.default_rng(seed))
+        posterior = paths.posterior()
         x0, cov = posterior.mean, posterior.covariance
     else:
         x0, cov = fitted.theta, np.linalg.inv(problem.fisher(fitted.theta, noise))
     tracker = ukf.tracker(problem, x0, 0.5 * (cov + cov.T))
     tracker.set_noise(noise)
-    return tracker, fitted
+    return tracker, fitted, paths
 
 
 def track_mission(
@@ -183,19 +210,23 @@ def track_mission(
     robot = load_robot(robot_name)
     model = IdentificationModel(robot, "fuel")
     walk = mission_random_walk(robot_name, gap_s)
+    step_kg = burn_rms_kg(robot_name)
     hybrid = estimator_from_spec("hybrid", seed=seed)
     rows: list[dict[str, Any]] = []
     samples: list[dict[str, Any]] = []
     tracker = None
+    paths = None  # the exact posterior's paths while the filter is not yet handed the mission (module docstring)
     reinit = "posterior" if first_window == "ukf" else first_window
     noise_dof = 0  # the degrees of freedom of the previous window's residual noise, set after each window
     for window in windows:
         start = time.perf_counter()
         problem = model.problem(window.log)
         fitted = None
-        alarm_nis = math.nan
+        alarm_nis = handover = effective = math.nan
+        regularised = 0
         if tracker is None:
-            tracker, fitted = first_window_tracker(ukf, problem, first_window, seed)
+            tracker, fitted, paths = first_window_tracker(ukf, problem, first_window, seed)
+            exact = paths is not None
             noise = tracker.noise_std_rad_s
             tracker.random_walk = walk.copy()
             nis = math.nan
@@ -221,9 +252,18 @@ def track_mission(
             nis = float(np.mean(tracker.nis[first_update:]))
             if nis > nis_alarm_bound(problem.n_samples, noise_dof):
                 alarm_nis = nis  # diverged: restart from this window's batch fit, nothing carried over
-                tracker, fitted = first_window_tracker(ukf, problem, reinit, seed)
+                tracker, fitted, paths = first_window_tracker(ukf, problem, reinit, seed)
                 tracker.random_walk = walk.copy()
                 noise, nis = tracker.noise_std_rad_s, math.nan
+                exact = paths is not None
+            elif exact := paths is not None:
+                paths.extend(problem, noise, step_kg, tracker.estimate())  # the window's exact posterior
+                posterior = paths.posterior()
+                effective, regularised = posterior.effective_samples, int(paths.regularised)
+                handover = expected_nees(posterior, *tracker.estimate())
+                tracker.set_state(posterior.mean, posterior.covariance)
+                if handover <= HANDOVER_NEES:
+                    paths = None  # the filter's update agrees with the exact posterior: it runs on alone
         filter_s = time.perf_counter() - start
         x, cov = tracker.estimate()
         window_noise = noise
@@ -250,6 +290,10 @@ def track_mission(
                 "ukf_noise_std_rad_s": window_noise,
                 "ukf_wall_time_s": filter_s,
                 "reinitialised": int(not math.isnan(alarm_nis)),
+                "exact_posterior": int(exact),
+                "handover_nees": handover,
+                "exact_effective_samples": effective,
+                "exact_regularised": regularised,
                 "alarm_nis_mean": alarm_nis,
                 "hybrid_fuel_consumed_kg": float(fitted.theta[0]),
                 "hybrid_fuel_std_kg": float(fitted.theta_std[0]),
@@ -271,77 +315,12 @@ def _ukf(spec: str, seed: int = 0) -> UnscentedKalman:
     return ukf
 
 
-def mean_bounds(dof_each: int, n: int, level: float = LEVEL) -> tuple[float, float]:
-    """Two-sided ``level`` bounds of the mean of ``n`` independent chi-square(``dof_each``) values."""
-    tail = 0.5 * (1.0 - level)
-    return float(chi2.ppf(tail, dof_each * n) / n), float(chi2.ppf(1.0 - tail, dof_each * n) / n)
-
-
 def nis_alarm_bound(updates: int, noise_dof: int, false_alarm: float = NIS_FALSE_ALARM) -> float:
     """The upper ``1 - false_alarm`` point of a consistent filter's mean NIS over ``updates`` 3-axis innovations when
     ``R`` is a residual variance estimated with ``noise_dof`` degrees of freedom: 3 F(3 updates, noise_dof)."""
     if updates < 1 or noise_dof < 1:
         raise SpaceIdInputError(f"nis_alarm_bound: expected updates and noise_dof >= 1, got {updates}, {noise_dof}")
     return float(INNOVATION_DOF * f.ppf(1.0 - false_alarm, INNOVATION_DOF * updates, noise_dof))
-
-
-def _runs_by_windows(values: FloatArray, name: str) -> FloatArray:
-    """``values`` as a finite (runs, windows) array with at least two runs; raises naming ``name`` otherwise."""
-    array = np.asarray(values, dtype=float)
-    if array.ndim != 2 or array.shape[0] < 2 or array.shape[1] < 1:
-        raise SpaceIdInputError(f"{name}: expected a (runs, windows) array with at least 2 runs, got shape {array.shape}")
-    if not np.all(np.isfinite(array)):
-        raise SpaceIdInputError(f"{name}: expected finite values")
-    return array
-
-
-def run_average_nees(nees: FloatArray, dof: int, level: float = LEVEL) -> tuple[FloatArray, float, float]:
-    """Bar-Shalom's Monte Carlo NEES test (Estimation with Applications to Tracking and Navigation, 2001, 5.4.2).
-
-    ``nees[i, k]``: run ``i``'s NEES after window ``k``, the runs independent. Returns the ``N``-run average at each
-    ``k`` and the two-sided ``level`` bounds it lies within for a consistent filter (``N`` times it is
-    chi-square(``N dof``)). The windows of one run may be correlated: the test never averages over ``k``."""
-    array = _runs_by_windows(nees, "nees")
-    low, high = mean_bounds(dof, array.shape[0], level)
-    return array.mean(axis=0), low, high
-
-
-def runs_mean_interval(
-    run_means: FloatArray, rng: np.random.Generator, level: float = LEVEL, resamples: int = 10000
-) -> tuple[float, tuple[float, float], tuple[float, float]]:
-    """The mean over independent runs of a per-run figure, with the runs as the unit: its Student-t interval and the
-    percentile interval of ``resamples`` bootstrap resamples of the runs drawn from ``rng``, both at ``level``.
-
-    A run's mean over its windows is one draw whatever their correlation, so both intervals hold for correlated
-    windows (the t-interval asks the runs' means to be near normal, the bootstrap enough runs)."""
-    values = _runs_by_windows(np.asarray(run_means, dtype=float)[:, None], "run_means")[:, 0]
-    n = values.size
-    mean = float(values.mean())
-    half = float(t_dist.ppf(0.5 * (1.0 + level), n - 1) * values.std(ddof=1) / math.sqrt(n))
-    boot = values[rng.integers(0, n, size=(resamples, n))].mean(axis=1)
-    tail = 0.5 * (1.0 - level)
-    low, high = np.quantile(boot, [tail, 1.0 - tail])
-    return mean, (mean - half, mean + half), (float(low), float(high))
-
-
-def lag_correlation(values: FloatArray, lag: int) -> float:
-    """The correlation between a run's window ``k`` and window ``k + lag``, pooled over the runs of ``values[i, k]``;
-    each window index centred and scaled over the runs, so a drift with ``k`` shared by all runs does not count."""
-    array = _runs_by_windows(values, "values")
-    if not 1 <= lag < array.shape[1]:
-        raise SpaceIdInputError(f"lag: expected 1 to {array.shape[1] - 1}, got {lag}")
-    std = array.std(axis=0)
-    scaled = (array - array.mean(axis=0)) / np.where(std > 0.0, std, 1.0)
-    return float(np.mean(scaled[:, :-lag] * scaled[:, lag:]))
-
-
-def lag_correlation_null(values: FloatArray, lag: int, rng: np.random.Generator, draws: int = 2000) -> FloatArray:
-    """:func:`lag_correlation` of ``draws`` copies of ``values`` whose runs are shuffled independently at each window
-    index (from ``rng``): its spread when a run's windows are independent, with each window's values kept."""
-    array = _runs_by_windows(values, "values")
-    n_runs, n_windows = array.shape
-    order = np.argsort(rng.random((draws, n_runs, n_windows)), axis=1)
-    return np.array([lag_correlation(np.take_along_axis(array, o, axis=0), lag) for o in order])
 
 
 def summarise_track(rows: list[dict[str, Any]]) -> dict[str, Any]:

@@ -16,7 +16,7 @@ import pytest
 
 from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
-from spaceid_gym.tracking import lag_correlation, lag_correlation_null, mean_bounds, run_average_nees, runs_mean_interval
+from spaceid_gym.track_statistics import lag_correlation, lag_correlation_null, mean_bounds, run_average_nees, runs_mean_interval
 
 EXPERIMENTS, RUNS, WINDOWS, UNKNOWNS = 400, 10, 10, 4
 

@@ -13,7 +13,8 @@ from scipy.stats import chi2
 
 from spaceid_gym.cli import main
 from spaceid_gym.mission import FuelSchedule
-from spaceid_gym.tracking import mean_bounds, mission_random_walk, simulate_mission
+from spaceid_gym.track_statistics import mean_bounds
+from spaceid_gym.tracking import mission_random_walk, simulate_mission
 
 #: a mission of 60 s windows (the command's design: 20 s windows at 27.5 kg consumed inform the tank position too
 #: little for a Gaussian posterior); over 10 measured missions no window's NEES passed chi-square(4)'s 99.9 % point
