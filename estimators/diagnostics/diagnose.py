@@ -80,6 +80,7 @@ from estimators.diagnostics.model_fit import (
     difference_noise_std,
     fit_model,
     independent_attitude_channel,
+    nuisance_basis,
 )
 from estimators.diagnostics.model_fit import (
     attitude_gyro_dependence as attitude_gyro_dependence,
@@ -273,6 +274,8 @@ def _diagnose(
             weights = ChannelWeights(white_std, baseline.attitude_noise, channel.coupling, channel.reference, channel.axes)
         # the baseline's own error model weights every candidate's fit and is the reference of the log-determinants
         baseline.attitude_chi2 = channel.chi2(baseline.theta, weights.attitude)
+    # the baseline's own unknowns, profiled out of every candidate's scan
+    basis = nuisance_basis(model.problem(log), baseline.theta, channel, weights)
     fits, variants_tried = [], 0
     n_values = baseline.n_residuals + baseline.n_attitude_values
     for name in names:
@@ -280,7 +283,7 @@ def _diagnose(
         # lowest BIC (at the gyro's white noise) stands for the effect, and the extra fits count in the Bonferroni
         variants: list[ModelFit] = []
         for spec in CANDIDATE_VARIANTS.get(name, (name,)):
-            variants.append(_fit_candidate(model, log, spec, baseline, weights, channel, variants))
+            variants.append(_fit_candidate(model, log, spec, baseline, weights, channel, basis, variants))
         variants_tried += len(variants) - 1
         fits.append(min(variants, key=lambda f: _chi2(f, white_std * white_std) + f.n_params * math.log(n_values)))
     _restart_the_closest(model, log, baseline, fits, white_std, weights, channel, alpha)
@@ -436,12 +439,15 @@ def _fit_candidate(
     baseline: ModelFit,
     weights: ChannelWeights | None,
     channel: AttitudeChannel | None,
+    basis: FloatArray,
     other_variants: Sequence[ModelFit] = (),
 ) -> ModelFit:
     """``model`` with the effect ``spec`` added, fitted from the baseline's fit, from the best of the term's grid and
     once from the default start (a missing effect can drag the baseline far off). The grid includes the term's
     candidates from the fits of the ``other_variants`` (:meth:`~estimators.models.effect_base.EffectTerm.grid_from_variant`:
-    a slosh pendulum from the spring-mass's fit, the rod along each of a finer set of axes)."""
+    a slosh pendulum from the spring-mass's fit, the rod along each of a finer set of axes). The grid is scored with
+    the model's own unknowns profiled out to first order on ``basis`` (:func:`~estimators.diagnostics.model_fit.nuisance_basis`
+    at the baseline)."""
     extended = candidate_model(model, spec)
     params = extended.parameters
     assert isinstance(params, WithEffects)
@@ -459,8 +465,7 @@ def _fit_candidate(
     n0 = len(baseline.theta)  # the model's own unknowns (base and effects already in it), then the candidate's
     grid += [np.concatenate((v.theta[:n0], s)) for v in other_variants for s in term.grid_from_variant(v.theta[n0:])]
     extended_channel = None if channel is None else AttitudeChannel.of(extended, log, channel.coupling, channel.reference)
-    nuisance = (np.concatenate((baseline.theta, term.nominal)), n0)
-    starts = best_of_grid(problem, grid, extended_channel, weights, nuisance)
+    starts = best_of_grid(problem, grid, extended_channel, weights, basis)
     starts.append(np.concatenate((restart, term.starts(restart[:k_base])[0])))
     starts.append(np.concatenate((baseline.theta, term.nominal)))  # the baseline itself: the nested model's fit
     return fit_model(extended, log, starts=starts, effect=term.name, weights=weights, problem=problem, profile_noise=True)[0]

@@ -506,16 +506,16 @@ def best_of_grid(
     candidates: list[FloatArray],
     channel: AttitudeChannel | None = None,
     weights: ChannelWeights | None = None,
-    nuisance: tuple[FloatArray, int] | None = None,
+    nuisance: FloatArray | None = None,
 ) -> list[FloatArray]:
     """The :data:`GRID_STARTS` candidates (each (k,)) of lowest score, scored in batched evaluations of
     :data:`GRID_BATCH` candidates: the gyro's chi-square, plus the attitude channel's with ``channel`` and ``weights``
     (an effect may show in one channel only).
 
-    With ``nuisance = (theta0, n)``, the score is profiled over the first ``n`` unknowns (the model's own, which the
-    fits from these starts refit), to first order: each candidate's residual (both channels, whitened) less its
-    projection on the columns of the residual's Jacobian in those unknowns at ``theta0`` (the fit without the
-    candidate's effect). Scored at the baseline's own unknowns instead, a candidate is judged where the missing effect
+    With ``nuisance`` (:func:`nuisance_basis`: an orthonormal basis of the whitened residual's Jacobian columns in the
+    model's own unknowns, which the fits from these starts refit, at the fit without the candidate's effect), the score
+    is profiled over those unknowns to first order: each candidate's residual (both channels, whitened) less its
+    projection on the basis. Scored at the baseline's own unknowns instead, a candidate is judged where the missing effect
     has dragged them: held-out log 9705's slow slosh (a 34 s pendulum) had pulled the fuel 34 std off, and there the true
     pendulum scored worse than the baseline, so no start was near it (the fit ended at 92 kg and 1.6 Hz, a likelihood
     ratio of 111 against about 1670 from the truth). Profiled, the scan ranks the true frequency first."""
@@ -524,7 +524,6 @@ def best_of_grid(
     points = np.clip(np.array(candidates), problem.parameters.lower, problem.parameters.upper)
     attitude = channel is not None and weights is not None
     sigma = weights.gyro_std_rad_s if weights is not None else 1.0
-    basis = None if nuisance is None else _nuisance_basis(problem, nuisance, channel, weights, sigma)
     scores = []
     for i in range(0, len(points), GRID_BATCH):
         batch = points[i : i + GRID_BATCH]
@@ -533,27 +532,25 @@ def best_of_grid(
             assert channel is not None and weights is not None
             rows = np.hstack((rows, channel.residual_rows(batch, weights.attitude)))
         score = np.sum(rows * rows, axis=1)
-        if basis is not None:
-            projected = rows @ basis
+        if nuisance is not None:
+            projected = rows @ nuisance
             score -= np.sum(projected * projected, axis=1)
         scores.append(score)
     order = np.argsort(np.concatenate(scores))
     return [points[i] for i in order[:GRID_STARTS]]
 
 
-def _nuisance_basis(
-    problem: IdentificationProblem,
-    nuisance: tuple[FloatArray, int],
-    channel: AttitudeChannel | None,
-    weights: ChannelWeights | None,
-    sigma: float,
+def nuisance_basis(
+    problem: IdentificationProblem, theta: FloatArray, channel: AttitudeChannel | None, weights: ChannelWeights | None
 ) -> FloatArray:
-    """An orthonormal basis (rows, m) of the whitened residual's Jacobian columns in the first ``n`` unknowns at
-    ``theta0`` (``nuisance = (theta0, n)``), both channels stacked as :func:`best_of_grid` scores them."""
-    theta0, n = nuisance
-    jac = problem.jacobian(theta0, count=False)[:, :n] / sigma
+    """An orthonormal basis (rows, k) of the residual's Jacobian columns at ``theta`` (k,), both channels whitened and
+    stacked as :func:`best_of_grid` scores them (the gyro's alone without ``channel`` and ``weights``). A candidate
+    effect at its nominal (off) predicts what the model without it does, so the model's own basis serves every
+    candidate's scan."""
+    sigma = weights.gyro_std_rad_s if weights is not None else 1.0
+    jac = problem.jacobian(theta, count=False) / sigma
     if channel is not None and weights is not None:
-        jac = np.vstack((jac, channel.jacobian(theta0, weights.attitude)[:, :n]))
+        jac = np.vstack((jac, channel.jacobian(theta, weights.attitude)))
     u, s, _ = np.linalg.svd(jac, full_matrices=False)
     return u[:, s > s[0] * np.sqrt(np.finfo(float).eps)]
 
