@@ -8,7 +8,7 @@ import pytest
 from scipy.stats import chi2
 
 from estimators.evaluation import estimator_from_spec
-from estimators.fuel_posterior import fuel_posterior, physical_prior_box
+from estimators.fuel_posterior import basin_minima, fuel_posterior, physical_prior_box
 from estimators.problem import IdentificationModel, IdentificationProblem
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.robots import load_robot
@@ -65,3 +65,24 @@ def test_the_posterior_is_seeded_and_too_few_draws_raise() -> None:
         fuel_posterior(problem, theta, noise, np.random.default_rng(5), samples=2)
     with pytest.raises(SpaceIdInputError, match="fuel consumed > 0"):
         fuel_posterior(problem, np.r_[0.0, theta[1:]], noise, np.random.default_rng(5))
+
+
+def test_a_first_fit_with_the_tank_mirrored_is_restarted_into_the_truths_basin() -> None:
+    # mission 218's first window: hybrid's fit stops with the tank mirrored in x (-0.50 m against +0.39 m); a polish
+    # from its x mirror image reaches a basin 36 chi-square units lower that holds the truth
+    window, problem = _first_window(218)
+    fitted = estimator_from_spec("hybrid", seed=218).fit_problem(problem)
+    assert fitted.theta[1] * window.theta_true[1] < 0.0
+    minima = basin_minima(problem, fitted.theta)
+    assert minima[0][1] * window.theta_true[1] > 0.0
+    assert problem.cost(minima[0][None], count=False)[0] < problem.cost(fitted.theta[None], count=False)[0]
+    x, cov = first_window_tracker(_ukf("ukf"), problem, "posterior", 218)[0].estimate()
+    error = x - window.theta_true
+    assert float(error @ np.linalg.solve(cov, error)) < NEES_999
+    # the mixture weighs the basins by their mass, not their order: started around the mirrored minimum with the
+    # truth's as the other basin, the posterior still lies in the truth's
+    noise = problem.noise_std(minima[0])[0]
+    mirrored = next(theta for theta in minima if theta[1] * window.theta_true[1] < 0.0)
+    posterior = fuel_posterior(problem, mirrored, noise, np.random.default_rng(1), basins=[minima[0]])
+    error = posterior.mean - window.theta_true
+    assert float(error @ np.linalg.solve(posterior.covariance, error)) < NEES_999
