@@ -26,7 +26,8 @@ from spaceid_gym.effects.draws import DEFAULT_MAGNITUDES, remaining_liquid_kg
 from spaceid_gym.effects.settings import HiddenEffects
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.excitation import FourierExcitation, SmoothRandomExcitation
-from spaceid_gym.robots import load_robot
+from spaceid_gym.log import MeasurementLog
+from spaceid_gym.robots import Robot, load_robot
 from spaceid_gym.sim.sensors import SensorModel
 from spaceid_gym.variations import (
     AXES,
@@ -149,6 +150,25 @@ def test_the_expected_power_rises_with_the_effect_and_is_alpha_without_it() -> N
     assert powers[0] < powers[1] and powers[1] > 0.99
 
 
+def _noise_free_log(
+    robot: Robot, fuel: np.ndarray, hidden: HiddenEffects, seed: int, sigma: float
+) -> tuple[MeasurementLog, dict[str, Any]]:
+    """A noise-free 20 s log of ``robot`` (fuel ``[mdf kg, tank m]``, ``hidden`` effects, a Fourier excitation of
+    ``seed``) without attitude, and its truth as truth.json gives it, the gyro's noise declared ``sigma`` rad/s."""
+    excitation = FourierExcitation(robot.n_joints, seed=seed, base_frequency_hz=0.05, n_harmonics=10)
+    env = simulate_episode(
+        robot, 20.0, fuel[0], fuel[1:], excitation, seed=seed, sensors=SensorModel.noise_free(), hidden_effects=hidden
+    )
+    log = dataclasses.replace(env.measurement_log(), quat_base_to_inertial_wxyz=None)
+    truth = {
+        "fuel_consumed_kg": fuel[0],
+        "tank_position_m": tuple(fuel[1:]),
+        "hidden_effects": hidden.to_dict(),
+        "noise": {"gyro_std_rad_s": sigma},
+    }
+    return log, truth
+
+
 def test_the_expected_power_of_a_pendulum_slosh_is_that_of_the_pendulum() -> None:
     """On a noise-free log of a 2 kg pendulum slosh (0.2 m rod, tilted), the non-centrality is the chi-square left by
     the best fit without the effect (at a gyro std of 1e-5 rad/s; small enough an effect for the local approximation):
@@ -165,18 +185,8 @@ def test_the_expected_power_of_a_pendulum_slosh_is_that_of_the_pendulum() -> Non
         slosh_length_m=0.2,
         slosh_axis=tuple(rod),
     )
-    excitation = FourierExcitation(paper6.n_joints, seed=1, base_frequency_hz=0.05, n_harmonics=10)
-    env = simulate_episode(
-        paper6, 20.0, fuel[0], fuel[1:], excitation, seed=1, sensors=SensorModel.noise_free(), hidden_effects=hidden
-    )
-    log = dataclasses.replace(env.measurement_log(), quat_base_to_inertial_wxyz=None)
     sigma = 1e-5
-    truth = {
-        "fuel_consumed_kg": fuel[0],
-        "tank_position_m": tuple(fuel[1:]),
-        "hidden_effects": hidden.to_dict(),
-        "noise": {"gyro_std_rad_s": sigma},
-    }
+    log, truth = _noise_free_log(paper6, fuel, hidden, seed=1, sigma=sigma)
     model = IdentificationModel(paper6, "fuel")
     problem = model.problem(log)
     residual = problem.residuals(LevenbergMarquardt(max_iterations=100).polish(problem, fuel).theta, count=False)
@@ -195,18 +205,8 @@ def test_the_separation_from_a_rival_is_what_the_rivals_best_fit_leaves() -> Non
     paper6 = load_robot("paper6")
     fuel = np.array([40.0, 0.2, -0.1, 0.1])  # mdf kg, tank m
     hidden = HiddenEffects(gyro_bias_rad_s=(2e-5, -1e-5, 1.5e-5))
-    excitation = FourierExcitation(paper6.n_joints, seed=2, base_frequency_hz=0.05, n_harmonics=10)
-    env = simulate_episode(
-        paper6, 20.0, fuel[0], fuel[1:], excitation, seed=2, sensors=SensorModel.noise_free(), hidden_effects=hidden
-    )
-    log = dataclasses.replace(env.measurement_log(), quat_base_to_inertial_wxyz=None)
     sigma = 2e-6
-    truth = {
-        "fuel_consumed_kg": fuel[0],
-        "tank_position_m": tuple(fuel[1:]),
-        "hidden_effects": hidden.to_dict(),
-        "noise": {"gyro_std_rad_s": sigma},
-    }
+    log, truth = _noise_free_log(paper6, fuel, hidden, seed=2, sigma=sigma)
     model = IdentificationModel(paper6, "fuel")
     rivals = ("initial_momentum", "external_torque")
     found = separation(model, "gyro_bias", log, truth, rivals=rivals)

@@ -52,10 +52,11 @@ def run_variation(case: VariationCase, duration_s: float = 60.0) -> dict[str, An
         env = simulate_variation(case, duration_s)
         model = IdentificationModel(env.robot, "fuel")
         clean = case.effect == NO_MISSING_EFFECT
-        row["expected_power"] = math.nan if clean else expected_power(model, case.effect, env.measurement_log(), truth_of(env))
+        log, truth = env.measurement_log(), truth_of(env)
+        row["expected_power"] = math.nan if clean else expected_power(model, case.effect, log, truth)
         row["nearest_rival"], row["separation_power"] = "", math.nan
         if not clean:
-            separations = separation(model, case.effect, env.measurement_log(), truth_of(env))
+            separations = separation(model, case.effect, log, truth)
             row["nearest_rival"] = min(separations, key=lambda rival: separations[rival].probability)
             row["separation_power"] = separations[row["nearest_rival"]].probability
         row.update(diagnosed_cells(env, case.effect))

@@ -34,7 +34,7 @@ from scipy.stats import chi2, ncx2
 from estimators.diagnostics.diagnose import CANDIDATE_VARIANTS, DEFAULT_CANDIDATES, candidate_model
 from estimators.diagnostics.model_fit import independent_attitude_channel
 from estimators.diagnostics.workflow import true_parameters
-from estimators.problem import IdentificationModel
+from estimators.problem import IdentificationModel, IdentificationProblem
 from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.log import MeasurementLog
@@ -82,19 +82,11 @@ def non_centrality(
     theta = true_parameters(model, truth)
     if theta is None:
         raise SpaceIdInputError("expected power: needs the fuel unknowns in the model and the fuel state in the truth")
-    gyro_std = (truth.get("noise") or {}).get("gyro_std_rad_s")
-    if gyro_std is None:
-        raise SpaceIdInputError("expected power: the truth has no gyro noise (noise.gyro_std_rad_s, as in truth.json)")
     problem = model.problem(log)
     term = problem.parameters.terms[-1]
     k = problem.parameters.n_params - term.n_params
     effect_off = _effect_off(term, effect, theta[k:])
-    fisher = problem.fisher(theta, float(gyro_std))
-    # as diagnose: an attitude that follows this gyro's noise (a fused estimate) is compared given the gyro
-    channel = independent_attitude_channel(model, log, theta, alpha).channel
-    if channel is not None:
-        # the attitude residual's error model at the truth: the source's noise and the model's own wander
-        fisher = fisher + channel.fisher(theta, channel.estimate_noise(theta))
+    fisher, _ = _information(model, problem, log, theta, truth, alpha)
     schur = fisher[k:, k:] - fisher[k:, :k] @ np.linalg.solve(fisher[:k, :k], fisher[:k, k:])
     shift = theta[k:] - effect_off
     return float(shift @ schur @ shift)
@@ -135,16 +127,10 @@ def separation(
     for rival in names:
         model = candidate_model(model, rival)
     theta = true_parameters(model, truth)
-    gyro_std = (truth.get("noise") or {}).get("gyro_std_rad_s")
-    if theta is None or gyro_std is None:
-        raise SpaceIdInputError("separation: needs the fuel state and the gyro noise (noise.gyro_std_rad_s) in the truth")
+    if theta is None:
+        raise SpaceIdInputError("separation: needs the fuel unknowns in the model and the fuel state in the truth")
     problem = model.problem(log)
-    fisher = problem.fisher(theta, float(gyro_std))
-    n_values = 3 * problem.n_samples
-    channel = independent_attitude_channel(model, log, theta, alpha).channel
-    if channel is not None:
-        fisher = fisher + channel.fisher(theta, channel.estimate_noise(theta))
-        n_values += channel.n_values
+    fisher, n_values = _information(model, problem, log, theta, truth, alpha)
     terms = problem.parameters.terms
     k_base = problem.parameters.base.n_params
     bounds = np.cumsum([k_base, *(t.n_params for t in terms)])
@@ -160,6 +146,30 @@ def separation(
         lam = float(shift @ schur @ shift)
         out[rival] = Separation(lam, wins_bic(lam, len(effect_index), len(rival_index), n_values))
     return out
+
+
+def _information(
+    model: IdentificationModel,
+    problem: IdentificationProblem,
+    log: MeasurementLog,
+    theta: FloatArray,
+    truth: dict[str, Any],
+    alpha: float,
+) -> tuple[FloatArray, int]:
+    """The Fisher information (k, k) of ``model`` (``problem`` on ``log``) at ``theta``, and the values it comes from:
+    the gyro's at the truth's noise, plus the attitude channel's as ``diagnose`` uses it (given the gyro where its
+    steps follow the gyro's noise, at level ``alpha``; its error model fitted at ``theta``: the source's noise and the
+    model's own wander)."""
+    gyro_std = (truth.get("noise") or {}).get("gyro_std_rad_s")
+    if gyro_std is None:
+        raise SpaceIdInputError("expected power: the truth has no gyro noise (noise.gyro_std_rad_s, as in truth.json)")
+    fisher = problem.fisher(theta, float(gyro_std))
+    n_values = 3 * problem.n_samples
+    channel = independent_attitude_channel(model, log, theta, alpha).channel
+    if channel is not None:
+        fisher = fisher + channel.fisher(theta, channel.estimate_noise(theta))
+        n_values += channel.n_values
+    return fisher, n_values
 
 
 def _effect_off(term: Any, effect: str, truth_part: FloatArray) -> FloatArray:
