@@ -518,3 +518,12 @@ def test_a_baseline_short_of_its_profile_optimum_hands_no_candidate_the_differen
         return fit.rss / sigma2 + channel.profile_chi2(fit.theta, fit.attitude_noise, d.weights.attitude)
 
     assert value(d.baseline) - value(again) < MIN_STEP_GAIN_CHI2
+
+
+def test_the_leaders_nearest_rival_is_restarted_too() -> None:
+    """Held-out log 9748 (``orbit7``, a 5" tracker, a momentum): the momentum's local fit stopped far above the
+    noise, the gyro bias was the closest candidate and was named; the rival is now restarted from global searches as
+    the closest is, and the momentum is named."""
+    env = simulate_variation(draw_variation("initial_momentum", 9748), 60.0)
+    d = diagnose(IdentificationModel(env.robot, "fuel"), env.measurement_log(), candidates=["gyro_bias", "initial_momentum"])
+    assert d.verdict == "initial_momentum", d.reason
