@@ -37,7 +37,8 @@ correlated over far more than the filter's 0.25 s (it follows the motion), and o
 the No5 movement (6 s) or too few blocks remain (about 10 per movement); 1 s and 4 s are printed as a check.
 A difference counts as a win only where its interval lies below 0.
 
-Run: ``.venv/bin/python benchmarks/ur5_fresh_movements.py ur5-real/`` (``--mask-only``: the mask alone).
+Run: ``.venv/bin/python benchmarks/ur5_fresh_movements.py ur5-real/`` (``--mask-only``: the mask alone; ``--margin``:
+another margin, a check added after the first run).
 """
 
 from __future__ import annotations
@@ -50,7 +51,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 from ur5_colony_vs_sdp import UNDISTURBED
 from ur5_extra_terms import OursScreen, relative_error, ur_screen
-from ur5_presliding import choose_lengths, presliding_columns
+from ur5_presliding import choose_lengths, lengths_text, presliding_columns
 from ur5_presliding_sdp import substituted
 
 from estimators.arm.identification import Preparation, fit, load_movements, physically_consistent
@@ -128,19 +129,19 @@ def intervals(t_s: FloatArray, masked: FloatArray) -> list[tuple[float, float]]:
     return [(float(t_s[a]), float(t_s[b - 1])) for a, b in zip(edges[::2], edges[1::2], strict=True)]
 
 
-def masks(data: str, logs: Mapping[str, ArmLog], preparation: Preparation) -> dict[str, FloatArray]:
+def masks(data: str, logs: Mapping[str, ArmLog], preparation: Preparation, margin_s: float = MARGIN_S) -> dict[str, FloatArray]:
     """The mask of each disturbed movement of ``logs``, the limit from its undisturbed ones; printed with its intervals."""
     deviation = controller_deviation(data, logs, preparation)
     threshold = push_threshold([deviation[name].effort for name in UNDISTURBED])
-    print(f"mask: centre A {np.round(threshold.centre_A, 3)}, limit A {np.round(threshold.limit_A, 3)}, margin {MARGIN_S} s")
+    print(f"mask: centre A {np.round(threshold.centre_A, 3)}, limit A {np.round(threshold.limit_A, 3)}, margin {margin_s} s")
     for name in UNDISTURBED:  # the check: each undisturbed movement with the limit of the other six
         others = push_threshold([deviation[other].effort for other in UNDISTURBED if other != name])
-        share = push_mask(deviation[name].t_s, deviation[name].effort, others).mean()
+        share = push_mask(deviation[name].t_s, deviation[name].effort, others, margin_s).mean()
         print(f"  {name} against the limit of the other six: masked {100 * share:.1f} %")
     out = {}
     for name in DISTURBED:
         log = deviation[name]
-        out[name] = push_mask(log.t_s, log.effort, threshold)
+        out[name] = push_mask(log.t_s, log.effort, threshold, margin_s)
         stretches = ", ".join(f"{a:.2f}-{b:.2f}" for a, b in intervals(log.t_s, out[name]))
         print(f"  {name}: masked {100 * out[name].mean():.1f} % of {log.t_s.size} samples ({stretches} s)")
     return out
@@ -155,7 +156,7 @@ def predictions(
         choice = np.full(model.n_joints, -1) if dahl is None else choose_lengths(screen, train, dahl)
         estimate = fit(model, {name: substituted(screen, name, choice) for name in train}, estimator)
         out[label] = {name: model.predict(estimate.theta, substituted(screen, name, choice)) for name in DISTURBED}
-        print(f"  {label}: lengths {choice.tolist()} (grid index, -1 Coulomb), consistent {physically_consistent(estimate)}")
+        print(f"  {label}: presliding lengths (rad) {lengths_text(choice)}; consistent {physically_consistent(estimate)}")
     ur = ur_screen(model, data, dict(logs), preparation)
     if any(not np.array_equal(ur.effort(name), screen.effort(name)) for name in DISTURBED):
         raise RuntimeError("UR's refitted model and ours do not see the same prepared samples")
@@ -172,11 +173,14 @@ def block_sums(effort: FloatArray, residual: FloatArray, t_s: FloatArray, keep: 
     return np.stack(sums, axis=1)[np.bincount(block, minlength=size) > 0]
 
 
-def bootstrap(sums: Mapping[str, Mapping[str, FloatArray]], pairs: Sequence[tuple[str, str]], seed: int = 0) -> None:
-    """The 95 % interval of the difference of pooled errors per pair, blocks resampled within each movement; ``sums``
-    by candidate and movement (B, 2) from :func:`block_sums`."""
+def bootstrap(
+    sums: Mapping[str, Mapping[str, FloatArray]], pairs: Sequence[tuple[str, str]], held: Sequence[str], seed: int = 0
+) -> None:
+    """The 95 % interval of the difference of the errors pooled over ``held`` per pair, blocks resampled within each
+    movement; ``sums`` by candidate and movement (B, 2) from :func:`block_sums`."""
     rng = np.random.default_rng(seed)
     draws = {name: rng.integers(0, len(block), (DRAWS, len(block))) for name, block in next(iter(sums.values())).items()}
+    draws = {name: draws[name] for name in held}
 
     def pooled(label: str) -> FloatArray:
         effort = sum(sums[label][name][index, 0].sum(axis=1) for name, index in draws.items())
@@ -187,8 +191,15 @@ def bootstrap(sums: Mapping[str, Mapping[str, FloatArray]], pairs: Sequence[tupl
         difference = pooled(first) - pooled(second)
         low, high = np.percentile(difference, [2.5, 97.5])
         print(
-            f"    {first[:3]}-{second[:3]}: 95 % [{low:+.2f}, {high:+.2f}] points, below 0 in {100 * np.mean(difference < 0):.1f} %"
+            f"    {first[:3]}-{second[:3]} {'+'.join(name.split('_')[1] for name in held)}: 95 % [{low:+.2f}, {high:+.2f}] "
+            f"points, below 0 in {100 * np.mean(difference < 0):.1f} %"
         )
+
+
+def correlation_zero(x: FloatArray) -> int:
+    """The first lag (samples) at which the autocorrelation of ``x`` (T,) falls below 0."""
+    x = x - x.mean()
+    return int(np.argmax(np.correlate(x, x, "full")[x.size - 1 :] < 0))
 
 
 def report(
@@ -204,6 +215,12 @@ def report(
         pooled, _ = relative_error(effort, np.concatenate([by_name[name][kept[name]] for name in held]))
         print(f"  {label:<26} pooled {pooled:6.2f} %  " + "  ".join(cells))
     pairs = [("(b) sdp + dahl_per_joint", "(a) sdp"), ("(b) sdp + dahl_per_joint", UR_LABEL), ("(c) sdp + dahl", "(a) sdp")]
+    for name in held:  # the block length's check: the correlation of the compared quantity on the longest kept stretch
+        stretch = max(np.split(np.flatnonzero(kept[name]), np.flatnonzero(np.diff(np.flatnonzero(kept[name])) > 1) + 1), key=len)
+        log = screen.rows[name].log
+        gain = np.sum((log.effort - predicted[pairs[0][0]][name]) ** 2 - (log.effort - predicted[pairs[0][1]][name]) ** 2, axis=1)
+        lag = correlation_zero(gain[stretch]) * float(np.median(np.diff(log.t_s)))
+        print(f"  {name}: autocorrelation of the (b)-(a) squared-error difference first below 0 at {lag:.2f} s")
     for block_s in BLOCK_S:
         print(f"  block bootstrap, {block_s} s blocks, {DRAWS} draws:")
         sums = {
@@ -213,7 +230,10 @@ def report(
             }
             for label, by_name in predicted.items()
         }
-        bootstrap(sums, pairs)
+        bootstrap(sums, pairs, held)
+        if block_s == BLOCK_S[0] and len(held) > 1:  # each movement alone, the same draws
+            for name in held:
+                bootstrap(sums, pairs, [name])
 
 
 def main() -> None:
@@ -221,12 +241,13 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("data", help="folder of the real UR5 movements (shared/data/ur5-real)")
     parser.add_argument("--mask-only", action="store_true", help="print the mask and stop")
+    parser.add_argument("--margin", type=float, default=MARGIN_S, help=f"the mask's margin, s (default {MARGIN_S}; a check)")
     args = parser.parse_args()
     print("command: .venv/bin/python benchmarks/ur5_fresh_movements.py " + " ".join(sys.argv[1:]))
     model = ArmIdentificationModel.build(load_arm("ur5"), ("coulomb_asymmetric", "viscous"), armature=True)
     preparation = Preparation()
     logs = load_movements(args.data, [*UNDISTURBED, *DISTURBED])
-    kept = {name: ~mask for name, mask in masks(args.data, logs, preparation).items()}
+    kept = {name: ~mask for name, mask in masks(args.data, logs, preparation, args.margin).items()}
     if args.mask_only:
         return
     screen = OursScreen(model, preparation.all_rows(model, logs))
