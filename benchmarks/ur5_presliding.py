@@ -156,8 +156,12 @@ def dahl_fit(screen: DesignScreen, train: Sequence[str], held: str, candidate: s
     design, columns, effort = stacked_columns(screen, train)
     theta = screen.solve(dahl_design(screen, design, columns, choice), effort)
     held_design, held_columns, _ = stacked_columns(screen, [held])
-    chosen = " ".join(f"{DAHL_GRID_RAD[g]:.1e}" if g >= 0 else "coulomb" for g in choice)
-    return theta, screen.predict(dahl_design(screen, held_design, held_columns, choice), theta), chosen
+    return theta, screen.predict(dahl_design(screen, held_design, held_columns, choice), theta), lengths_text(choice)
+
+
+def lengths_text(choice: FloatArray) -> str:
+    """The grid indices ``choice`` (n,) as the presliding lengths per joint, rad (``coulomb`` for -1)."""
+    return " ".join(f"{DAHL_GRID_RAD[g]:.1e}" if g >= 0 else "coulomb" for g in choice)
 
 
 def report_levels(

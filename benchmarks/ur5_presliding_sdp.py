@@ -19,7 +19,7 @@ import argparse
 
 import numpy as np
 from ur5_extra_terms import SCATTER_POINTS, OursScreen, held_out, real_setup, ur_screen
-from ur5_presliding import DAHL_CANDIDATES, DAHL_GRID_RAD, choose_lengths, dahl_design, presliding_columns, stacked_columns
+from ur5_presliding import DAHL_CANDIDATES, choose_lengths, dahl_design, lengths_text, presliding_columns, stacked_columns
 
 from estimators.arm.identification import fit, physically_consistent, prediction_error
 from estimators.arm.model import IdentificationRows
@@ -55,7 +55,7 @@ def main() -> None:
             overall.append(error.overall_percent)
             joints.append(error.relative_percent)
             consistent += bool(physically_consistent(estimate))
-            chosen.append(" ".join(f"{DAHL_GRID_RAD[g]:.1e}" if g >= 0 else "coulomb" for g in choice))
+            chosen.append(lengths_text(choice))
         mean = np.mean(joints, axis=0)
         print(
             f"{candidate:<16} mean {np.mean(overall):6.2f} %  folds {' '.join(f'{v:5.2f}' for v in overall)}  joints "
