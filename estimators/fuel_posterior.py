@@ -92,6 +92,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import least_squares
+from scipy.special import gammaln
 from threadpoolctl import threadpool_limits
 
 from estimators.least_squares import LevenbergMarquardt
@@ -106,6 +107,10 @@ PROPOSAL_DOF = 4.0
 #: the proposal's scale over the linearised std: 2, so the proposal's central 95 % holds the posterior's bend out to
 #: about 4 linearised std (efficiency only: the importance weights correct any proposal that covers the posterior)
 PROPOSAL_WIDTH = 2.0
+
+#: the log of the multivariate Student-t's normalising constant in 4 dimensions, ``Gamma((nu + 4) / 2) / (Gamma(nu / 2)
+#: (nu pi)^2)``: a mixture of the t's and the kernels' Gaussians weighs densities, not densities up to different constants
+LOG_T_CONSTANT = float(gammaln(0.5 * (PROPOSAL_DOF + 4.0)) - gammaln(0.5 * PROPOSAL_DOF) - 2.0 * np.log(PROPOSAL_DOF * np.pi))
 
 #: the effective sample size the moments need: a variance from n effective draws has a relative std of about
 #: sqrt(2 / n), 0.1 at 200
@@ -180,11 +185,10 @@ class MomentProposal:
         return self.centre + whitened @ self.factor.T
 
     def log_density(self, theta: FloatArray) -> FloatArray:
-        """The log density (n,) in ``theta`` (n, 4), up to the t's constant: the t's in ``(mdf, g)`` times the
-        Jacobian ``mdf^3``."""
+        """The log density (n,) in ``theta`` (n, 4): the t's in ``(mdf, g)`` times the Jacobian ``mdf^3``."""
         whitened = np.linalg.solve(self.factor, (_first_moment(theta) - self.centre).T).T
         log_t = -0.5 * (PROPOSAL_DOF + 4.0) * np.log1p(np.sum(whitened * whitened, axis=1) / PROPOSAL_DOF)
-        return log_t - self.log_det + 3.0 * np.log(theta[:, 0])
+        return LOG_T_CONSTANT + log_t - self.log_det + 3.0 * np.log(theta[:, 0])
 
 
 class MixtureProposal:
@@ -202,7 +206,7 @@ class MixtureProposal:
         return np.concatenate([np.empty((0, 4))] + [c.draw(rng, n) for c, n in zip(self.components, counts, strict=True)])
 
     def log_density(self, theta: FloatArray) -> FloatArray:
-        """The log density (n,) in ``theta`` (n, 4), up to the t's constant (the same for every component)."""
+        """The log density (n,) in ``theta`` (n, 4)."""
         logs = [w + c.log_density(theta) for c, w in zip(self.components, self.log_weights, strict=True)]
         return np.logaddexp.reduce(np.array(logs), axis=0)
 
@@ -331,7 +335,7 @@ class PredictedPrior:
         return self.centres[index] + rng.standard_normal((samples, 4)) @ self.factor.T
 
     def log_density(self, theta: FloatArray) -> FloatArray:
-        """The log density (n,) at ``theta`` (n, 4), up to the Gaussian's constant ``(2 pi)^-2``."""
+        """The log density (n,) at ``theta`` (n, 4)."""
         centres = np.linalg.solve(self.factor, self.centres.T).T
         norms = np.sum(centres * centres, axis=1)
         out = [np.empty(0)]
@@ -339,7 +343,7 @@ class PredictedPrior:
             z = np.linalg.solve(self.factor, theta[i : i + CHUNK].T).T
             squared = np.sum(z * z, axis=1)[:, None] + norms[None] - 2.0 * z @ centres.T
             out.append(np.logaddexp.reduce(np.log(self.weights)[None] - 0.5 * squared, axis=1))
-        return np.concatenate(out) - self.log_det
+        return np.concatenate(out) - self.log_det - 2.0 * np.log(2.0 * np.pi)
 
 
 def _log_likelihood(problem: IdentificationProblem, noise_std_rad_s: float, reference: float, theta: FloatArray) -> FloatArray:
@@ -442,10 +446,11 @@ class FuelPaths:
         """Move to the next window (module docstring): each path takes the gap's random-walk step of std
         ``step_std_kg`` in the fuel (outside the box the prior is 0: dropped) and is weighted by the window's
         likelihood (noise ``noise_std_rad_s``); if fewer than :data:`MIN_EFFECTIVE_SAMPLES` remain effective, the
-        window is sampled afresh under the :class:`PredictedPrior` of the last, from an equal mixture of that prior
-        and a proposal matched to ``guess`` (mean (4,), covariance (4, 4): a Gaussian approximation of the new
-        posterior, e.g. the filter's); ``regularise``: sample afresh even if enough paths stay effective (to compare
-        the two)."""
+        window is sampled afresh under the :class:`PredictedPrior` of the last, from an equal mixture of that prior,
+        a proposal matched to ``guess`` (mean (4,), covariance (4, 4): a Gaussian approximation of the new
+        posterior, e.g. the filter's) and the window's :func:`valley_slices` from its least-squares minimum nearest
+        the guess, each slice weighted by its Laplace mass times the prior at its centre; ``regularise``: sample
+        afresh even if enough paths stay effective (to compare the two)."""
         if problem.parameters.names != self.names:
             raise SpaceIdInputError(f"fuel posterior: the window's unknowns {problem.parameters.names} differ")
         _check_noise(noise_std_rad_s, step_std_kg)
@@ -462,16 +467,20 @@ class FuelPaths:
         if not self.regularised:
             return
         prior = PredictedPrior(*before, step_std_kg)
-        proposal = MomentProposal(centre, guess[1])
+        minimum = LevenbergMarquardt().polish(problem, centre).theta
+        valley, valley_mass = valley_slices(problem, minimum, noise_std_rad_s, self.lower, self.upper)
+        valley_mass = valley_mass + prior.log_density(np.array([theta for theta, _ in valley]))
+        valley_mass -= np.logaddexp.reduce(valley_mass)
+        proposal = MixtureProposal([(centre, guess[1]), *valley], np.r_[np.log(0.5), np.log(0.5) + valley_mass])
 
         def batch() -> tuple[FloatArray, FloatArray]:
-            n_moment = int(self.rng.binomial(self.samples, 0.5))
+            n_moment = int(self.rng.binomial(self.samples, 2.0 / 3.0))
             drawn = [_from_moment(proposal.draw(self.rng, n_moment), self.lower, self.upper)]
             drawn.append(prior.draw(self.rng, self.samples - n_moment))
             theta = np.concatenate(drawn)
             theta = theta[np.all((theta > self.lower) & (theta < self.upper), axis=1)]
             log_prior = prior.log_density(theta)
-            log_q = np.logaddexp(proposal.log_density(theta), log_prior) - np.log(2.0)
+            log_q = np.logaddexp(np.log(2.0 / 3.0) + proposal.log_density(theta), np.log(1.0 / 3.0) + log_prior)
             return theta, log_prior + _log_likelihood(problem, noise_std_rad_s, reference, theta) - log_q
 
         self.draws = 0
