@@ -43,8 +43,8 @@ The paths degenerate as the windows sharpen the tank (the tank has no process no
 :class:`PredictedPrior`, a Gaussian kernel density of the last window's paths (a regularised particle filter:
 Musso, Oudjane and Le Gland 2001; the kernel's bandwidth by Silverman's rule for the effective number of draws,
 0.49 std at 200, with Liu and West's 2001 shrinkage so the mean and covariance are kept) plus the gap's step in the
-fuel; the draws come from an equal mixture of that prior and a Student-t matched as above to a Gaussian guess of the
-new posterior (the filter's), with weights ``prior x likelihood / mixture``. The kernel smooths the last
+fuel; the draws come from an equal mixture of that prior, a Student-t matched as above to a Gaussian guess of the
+new posterior (the filter's) and the window's valley (below), with weights ``prior x likelihood / mixture``. The kernel smooths the last
 posterior: on mission 241's window 1 a forced kernel step gives 26.9 +- 7.2 kg (NEES 9.3) where the exact push
 gives 29.2 +- 7.5 kg (NEES 7.3), so it is used only where the exact push has too few effective draws. New whole
 paths from the first window instead (from its proposal, or one matched to the paths' first window under every
@@ -67,22 +67,24 @@ Cramér-Rao covariance at the mode): two basins within a few
 chi-square units both get draws in proportion to their mass, one 36 units above gets ``e^-18`` of them, and the
 importance weights correct whatever the Laplace masses miss (a proposal only has to cover the posterior).
 
-The valley along the fuel (:func:`valley_slices`; issue 23, mission 322): where little of the tank's effect is seen,
-the cost can be nearly flat along the fuel consumed and the posterior's mass lie far from the fit. Mission 322's
-first window: ``hybrid``'s fit, 47.5 kg (truth 27.5, Cramér-Rao std 21 kg), is the minimum of the cost's profile
-(the tank polished at each fuel), which rises only 3.1 chi-square units down to 3.9 kg, while the tank's conditional
-spread ``sqrt(det C_bb)`` grows about as ``mdf^-3`` (the rates see the first moment ``mdf bf``, and the tank's
-inertia terms bend the valley: ``g`` goes from (-6.5, -0.8, -6.0) to (-1.3, -0.2, -1.5) kg m on the way): per kg the
-posterior is densest at low fuel, flat in ``log mdf`` from about 4 to 60 kg until the box's edge at 0.40 m cuts the
-tank below 3 kg. The proposal around the fit reached 70-91 effective draws in 64 000 there. So the proposal is a
-defensive mixture (Hesterberg 1995): half its draws from the basins' components above, half from one component per
-slice of a geometric grid in the fuel (every 25 %, :data:`VALLEY_RATIO`), centred on the profile (the tank polished
-at the slice's fuel), with the tank's conditional Cramér-Rao covariance there, the valley's local slope, and a fuel
-spread of one cell, weighted by the slice's Laplace mass (the profile's likelihood times the tank's conditional
-volume times the cell: a quadrature of the posterior's marginal in the fuel). The valley's half follows the cost
-along the fuel whatever the fit, so it covers a posterior lying anywhere along the valley by construction; where the
-posterior is narrow around the fit the basins' half covers it, and the valley's half costs at most half the draws.
-The effective-size error stays for a posterior neither half covers.
+The valley along the fuel (:func:`valley_slices`; issue 23, mission 322): the cost can be nearly flat along the fuel
+and the posterior's mass lie far from the fit. Mission 322's first window: the fit, 47.5 kg (truth 27.5, Cramér-Rao
+std 21 kg), is the minimum of the cost's profile (the tank polished at each fuel), which rises only 3.1 chi-square
+units down to 3.9 kg, while the tank's conditional spread ``sqrt(det C_bb)`` grows about as ``mdf^-3`` (the rates
+see ``mdf bf``; inertia terms bend the valley, ``g`` from (-6.5, -0.8, -6.0) to (-1.3, -0.2, -1.5) kg m): per kg
+the posterior is densest at low fuel, flat in ``log mdf`` from 4 to 60 kg until the box's edge cuts the tank below
+3 kg (18.8 +- 15.4 kg by plain sampling from the prior). The proposal around the fit reached 64-91 effective draws
+in 64 000. So the proposal is a defensive mixture (Hesterberg 1995): half its draws from the basins' components,
+half from one component per slice of a geometric grid in the fuel (:data:`VALLEY_RATIO`), centred on the profile,
+with the tank's conditional Cramér-Rao covariance, the valley's local slope and a fuel spread of one cell, weighted
+by the slice's Laplace mass (the profile's likelihood times the tank's conditional volume times the cell: a
+quadrature of the posterior's marginal in the fuel). The valley's half follows the cost whatever the fit, so it
+covers a posterior anywhere along the valley by construction; where the posterior is narrow around the fit the
+basins' half covers it, at the cost of at most half the draws. A later window sampled afresh draws a third from its
+own valley, from its least-squares minimum nearest the guess, each slice weighted also by the kernel prior at its
+centre (mission 322's window 1: the filter's guess 17.8 +- 2.8 kg against a posterior of 40-44 +- 10 kg). The
+mixtures weigh full densities (the t's and the Gaussians' normalising constants). The effective-size error stays
+for a posterior no part covers.
 """
 
 from __future__ import annotations
