@@ -315,7 +315,8 @@ def run_arm_identify(args: argparse.Namespace) -> None:
             )
     estimate = fit(model, {n: rows[n] for n in train}, estimator)
     args.out.mkdir(parents=True, exist_ok=True)
-    estimate.extra.update(model=model.describe(), preparation=preparation.as_dict())
+    described = model.describe() + (" + presliding" if choice is not None else "")
+    estimate.extra.update(model=described, preparation=preparation.as_dict())
     if gains is not None:
         estimate.extra["gains"] = gains.to_dict()
     if choice is not None:
@@ -325,7 +326,7 @@ def run_arm_identify(args: argparse.Namespace) -> None:
     write_json_atomic(
         args.out / "validation.json",
         {
-            "model": model.describe(),
+            "model": described,
             "estimator": args.estimator,
             "training_movements": train,
             "held_out": [e.to_dict() for e in errors],
@@ -340,12 +341,12 @@ def run_arm_identify(args: argparse.Namespace) -> None:
             log.effort,
             log.effort - error.residual,
             channel_names=[f"joint {j + 1}" for j in range(model.n_joints)],
-            title=f"{name}: measured vs {args.estimator} ({model.describe()})",
+            title=f"{name}: measured vs {args.estimator} ({described})",
             units=unit,
         )
     consistent = estimate.physical.get("links_physically_consistent")
     print(
-        f"{model.describe()}; {estimate.estimator} on {len(train)} movement(s) in {estimate.wall_time_s:.1f} s "
+        f"{described}; {estimate.estimator} on {len(train)} movement(s) in {estimate.wall_time_s:.1f} s "
         f"({estimate.n_evaluations:.0f} evaluations)"
         + ("" if consistent is None else f"; physically consistent links: {sum(consistent)}/{len(consistent)}")
     )
