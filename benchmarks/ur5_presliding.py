@@ -1,5 +1,9 @@
 """The ``dahl`` candidate of ``ur5_extra_terms.py``: presliding (hysteretic) friction in place of the Coulomb columns.
 
+The columns, the grid and the choice are the package's (:mod:`estimators.arm.presliding_choice`, the model option
+``--presliding``, which is ``dahl_per_joint`` with ours); this module adapts them to the screens of the benchmark
+(ours and UR's refitted model).
+
 The Dahl model (:mod:`spaceid_gym.arm.presliding`) replaces each joint's Coulomb column ``s(dq_j)`` (asymmetric
 model: ``max(s, 0)``, ``min(s, 0)``) by the state ``h_j`` (``max(h_j, 0)``, ``min(h_j, 0)``) driven by joint
 ``j``'s position with a presliding length ``delta_j``. The columns are computed like the model's own: on the filtered
@@ -27,14 +31,20 @@ import numpy as np
 
 from estimators.arm.identification import Preparation
 from estimators.arm.model import ArmIdentificationModel
+from estimators.arm.presliding_choice import (
+    PRESLIDING_GRID_RAD,
+    PreslidingChoice,
+    choose_presliding,
+    presliding_design,
+)
+from estimators.arm.presliding_choice import (
+    presliding_columns as package_columns,
+)
 from spaceid_gym.arm.joint_log import ArmLog
-from spaceid_gym.arm.presliding import presliding_state
-from spaceid_gym.arm.signal import parallel_decimation
 from spaceid_gym.arrays import FloatArray
 
-#: the presliding lengths (rad) each fold chooses from per joint (a finer grid below 1e-4 rad, where most joints pick)
-DAHL_GRID_RAD = np.geomspace(1e-6, 5e-2, 15)
-DAHL_MAX_SWEEPS = 10
+#: the presliding lengths (rad) each fold chooses from per joint (the package's grid)
+DAHL_GRID_RAD = PRESLIDING_GRID_RAD
 #: the candidates: name -> whether a joint may keep the model's Coulomb column (grid index -1)
 DAHL_CANDIDATES = {"dahl": False, "dahl_per_joint": True}
 
@@ -77,17 +87,9 @@ class DesignScreen(Protocol):
 
 
 def presliding_columns(model: ArmIdentificationModel, log: ArmLog, preparation: Preparation) -> FloatArray:
-    """(T, n, G, c) the raw ``log``'s Dahl columns (per N m of level) at every length of :data:`DAHL_GRID_RAD`,
-    parallel-filtered; ``c`` = the model's Coulomb columns per joint (2: ``max(h, 0)``, ``min(h, 0)``)."""
-    asymmetric = "coulomb_asymmetric" in model.regressor.friction.terms
-
-    def columns(q: FloatArray, dq: FloatArray, ddq: FloatArray) -> FloatArray:
-        h = presliding_state(q, np.tile(DAHL_GRID_RAD, (q.shape[1], 1)))
-        parts = (np.maximum(h, 0.0), np.minimum(h, 0.0)) if asymmetric else (h,)
-        return np.stack(parts, axis=-1).reshape(q.shape[0], q.shape[1], -1)
-
-    _, filtered = parallel_decimation(log, columns, preparation.cutoff_hz, preparation.decimate_factor, preparation.order)
-    return filtered.reshape(filtered.shape[0], model.n_joints, len(DAHL_GRID_RAD), -1)
+    """(T, n, G, c) the raw ``log``'s Dahl columns per unit of level at every length of :data:`DAHL_GRID_RAD`
+    (the package's, before the effort unit: :meth:`DesignScreen.column_scale` gives it per screen)."""
+    return package_columns(model, log, preparation, in_effort_unit=False)
 
 
 def stacked_columns(screen: DesignScreen, names: Sequence[str]) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -102,51 +104,15 @@ def stacked_columns(screen: DesignScreen, names: Sequence[str]) -> tuple[FloatAr
 def dahl_design(screen: DesignScreen, design: FloatArray, columns: FloatArray, choice: FloatArray) -> FloatArray:
     """``design`` (T, n, k) with each joint's Coulomb columns replaced by its Dahl ``columns`` (T, n, G, c) at the grid
     index ``choice[j]`` (-1: kept)."""
-    design = design.copy()
-    for j, slots in enumerate(screen.coulomb_slots()):
-        if choice[j] >= 0:
-            design[:, j, slots] = columns[:, j, choice[j], :]
-    return design
-
-
-def replaced_costs(system: FloatArray, target: FloatArray, slots: FloatArray, replacements: FloatArray) -> FloatArray:
-    """(G,) the least-squares cost of ``system`` (N, k) on ``target`` (N,) with its columns ``slots`` (c,) replaced by
-    each of ``replacements`` (G, N, c): the other columns projected out once (a QR), then each replacement alone."""
-    basis, _ = np.linalg.qr(np.delete(system, slots, axis=1))
-    rest = target - basis @ (basis.T @ target)
-    costs = []
-    for columns in replacements:
-        columns = columns - basis @ (basis.T @ columns)
-        costs.append(float(np.sum((rest - columns @ np.linalg.lstsq(columns, rest, rcond=None)[0]) ** 2)))
-    return np.array(costs)
+    return presliding_design(design, columns, screen.coulomb_slots(), choice)
 
 
 def choose_lengths(screen: DesignScreen, train: Sequence[str], candidate: str) -> FloatArray:
     """(n,) per joint the grid index of the presliding length (-1: the model's Coulomb column), by the training cost
-    only (module docstring)."""
+    only (:func:`estimators.arm.presliding_choice.choose_presliding`)."""
     design, columns, effort = stacked_columns(screen, train)
-    flat = design.reshape(-1, design.shape[2])
-    residual = flat @ np.linalg.lstsq(flat, effort.reshape(-1), rcond=None)[0] - effort.reshape(-1)
-    weight = 1.0 / np.sqrt(np.mean(residual.reshape(effort.shape) ** 2, axis=0))
     keep = DAHL_CANDIDATES[candidate]
-    choice = np.full(screen.model.n_joints, -1 if keep else 0)
-    options = np.arange(-1 if keep else 0, len(DAHL_GRID_RAD))
-    for _ in range(DAHL_MAX_SWEEPS):
-        before = choice.copy()
-        for j, slots in enumerate(screen.coulomb_slots()):
-            trial = dahl_design(screen, design, columns, choice)
-            own = np.concatenate([design[:, j, slots][None], np.moveaxis(columns[:, j], 1, 0)])  # (1 + G, T, c)
-            if screen.joints_apart:  # only joint j's own least squares changes
-                costs = replaced_costs(trial[:, j, :], effort[:, j], slots, own[options + 1])
-            else:  # the weighted system of every joint; joint j's columns act on its rows only
-                placed = np.zeros((len(options), *effort.shape, len(slots)))
-                placed[:, :, j, :] = own[options + 1] * weight[j]
-                system = (trial * weight[:, None]).reshape(-1, design.shape[2])
-                costs = replaced_costs(system, (effort * weight).reshape(-1), slots, placed.reshape(len(options), -1, len(slots)))
-            choice[j] = options[int(np.argmin(costs))]
-        if np.array_equal(choice, before):
-            return choice
-    raise RuntimeError(f"dahl: the presliding lengths did not settle in {DAHL_MAX_SWEEPS} sweeps")
+    return choose_presliding(design, columns, effort, screen.coulomb_slots(), keep, screen.joints_apart)
 
 
 def dahl_fit(screen: DesignScreen, train: Sequence[str], held: str, candidate: str) -> tuple[FloatArray, FloatArray, str]:
@@ -161,7 +127,7 @@ def dahl_fit(screen: DesignScreen, train: Sequence[str], held: str, candidate: s
 
 def lengths_text(choice: FloatArray) -> str:
     """The grid indices ``choice`` (n,) as the presliding lengths per joint, rad (``coulomb`` for -1)."""
-    return " ".join(f"{DAHL_GRID_RAD[g]:.1e}" if g >= 0 else "coulomb" for g in choice)
+    return PreslidingChoice(np.asarray(choice)).text()
 
 
 def report_levels(

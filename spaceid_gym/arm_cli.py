@@ -33,6 +33,12 @@ from estimators.arm.identification import (
     summary_table,
 )
 from estimators.arm.model import ArmIdentificationModel
+from estimators.arm.presliding_choice import (
+    check_presliding_model,
+    choose_for_rows,
+    presliding_for_movements,
+    with_presliding,
+)
 from estimators.diagnostics.plots import plot_overlay
 from estimators.evaluation import estimator_from_spec, parse_estimator_specs
 from spaceid_gym.arm.arm_robot import load_arm
@@ -164,10 +170,21 @@ def _add_gain_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_presliding_argument(parser: argparse.ArgumentParser) -> None:
+    """``--presliding`` (identify and cross-validate)."""
+    parser.add_argument(
+        "--presliding",
+        action="store_true",
+        help="presliding (Dahl) friction: per joint, the Coulomb level's onset follows the position over a presliding "
+        "length, or keeps the rate's smooth sign, as the training movements' cost chooses (needs a Coulomb term)",
+    )
+
+
 def add_arm_identify_arguments(parser: argparse.ArgumentParser) -> None:
     """The arguments of ``spaceid arm identify``."""
     _add_data_arguments(parser)
     _add_gain_arguments(parser)
+    _add_presliding_argument(parser)
     parser.add_argument("--train", default=None, help="comma-separated training movements (default: all but --validate)")
     parser.add_argument("--validate", default=None, help="comma-separated held-out movements (default none)")
     parser.add_argument(
@@ -181,6 +198,7 @@ def add_arm_cross_validate_arguments(parser: argparse.ArgumentParser) -> None:
     """The arguments of ``spaceid arm cross-validate``."""
     _add_data_arguments(parser)
     _add_gain_arguments(parser)
+    _add_presliding_argument(parser)
     parser.add_argument("--movements", default=None, help="comma-separated movements (default all)")
     parser.add_argument(
         "--estimators",
@@ -269,9 +287,19 @@ def run_arm_identify(args: argparse.Namespace) -> None:
     if not train:
         raise SpaceIdInputError("--train: no training movement left (every movement is in --validate)")
     model = _model(args)
+    presliding = getattr(args, "presliding", False)
+    if presliding:
+        check_presliding_model(model)
+        if args.identify_gains:
+            raise SpaceIdInputError("--presliding and --identify-gains: not available together (the gains rescale the rows)")
     estimator = estimator_from_spec(args.estimator, seed=args.seed)
     rows = preparation.all_rows(model, raw)
-    gains = None
+    gains, choice = None, None
+    if presliding:
+        columns = presliding_for_movements(model, raw, preparation)
+        choice = choose_for_rows(model, {n: rows[n] for n in train}, columns)
+        rows = {name: with_presliding(model, item, columns[name], choice) for name, item in rows.items()}
+        print(f"presliding length per joint (rad, chosen on the training movements): {choice.text()}")
     if args.identify_gains:
         kappa = max(preparation.correlation_factor(raw_period(raw[n])) for n in train)
         gains = identify_gains(model, {n: rows[n] for n in train}, args.gain_reference, kappa=kappa)
@@ -287,15 +315,18 @@ def run_arm_identify(args: argparse.Namespace) -> None:
             )
     estimate = fit(model, {n: rows[n] for n in train}, estimator)
     args.out.mkdir(parents=True, exist_ok=True)
-    estimate.extra.update(model=model.describe(), preparation=preparation.as_dict())
+    described = model.describe() + (" + presliding" if choice is not None else "")
+    estimate.extra.update(model=described, preparation=preparation.as_dict())
     if gains is not None:
         estimate.extra["gains"] = gains.to_dict()
+    if choice is not None:
+        estimate.extra["presliding_rad"] = choice.lengths_rad
     estimate.write_json(args.out / "estimate.json")
     errors = [prediction_error(model, estimate.theta, rows[name], floors[name]) for name in validate]
     write_json_atomic(
         args.out / "validation.json",
         {
-            "model": model.describe(),
+            "model": described,
             "estimator": args.estimator,
             "training_movements": train,
             "held_out": [e.to_dict() for e in errors],
@@ -310,12 +341,12 @@ def run_arm_identify(args: argparse.Namespace) -> None:
             log.effort,
             log.effort - error.residual,
             channel_names=[f"joint {j + 1}" for j in range(model.n_joints)],
-            title=f"{name}: measured vs {args.estimator} ({model.describe()})",
+            title=f"{name}: measured vs {args.estimator} ({described})",
             units=unit,
         )
     consistent = estimate.physical.get("links_physically_consistent")
     print(
-        f"{model.describe()}; {estimate.estimator} on {len(train)} movement(s) in {estimate.wall_time_s:.1f} s "
+        f"{described}; {estimate.estimator} on {len(train)} movement(s) in {estimate.wall_time_s:.1f} s "
         f"({estimate.n_evaluations:.0f} evaluations)"
         + ("" if consistent is None else f"; physically consistent links: {sum(consistent)}/{len(consistent)}")
     )
@@ -336,13 +367,18 @@ def run_arm_cross_validate(args: argparse.Namespace) -> None:
     preparation, logs, floors = _movements(args, _names(args.movements))
     specs = parse_estimator_specs(args.estimators)
     estimators = {spec: estimator_from_spec(spec, seed=args.seed) for spec in specs}
+    presliding = getattr(args, "presliding", False)
     label = (args.friction if parse_friction(args.friction) else "no friction") + (" + armature" if args.armature else "")
+    label += " + presliding" if presliding else ""
     models = {f"with {label}": _model(args)}
+    if presliding:
+        check_presliding_model(models[f"with {label}"])
     if args.compare_without_friction:
         models["without friction"] = _model(args, ())
     start = time.perf_counter()
     gain_reference = args.gain_reference if args.identify_gains else None
-    rows = leave_one_out(models, logs, estimators, preparation, floors, executor, gain_reference)
+    dahl = [f"with {label}"] if presliding else []
+    rows = leave_one_out(models, logs, estimators, preparation, floors, executor, gain_reference, dahl)
     implied_gains = None
     if getattr(args, "compare_ur_model", False):
         terms = parse_friction(args.ur_model_friction)
@@ -388,6 +424,13 @@ def run_arm_cross_validate(args: argparse.Namespace) -> None:
             f"torque constants identified (N m/A, reference {gain_reference}, mean over folds): "
             + " ".join(f"{v:.2f}" for v in np.mean(identified, axis=0))
         )
+    chosen = [(r.error.movement, r.presliding_rad) for r in rows if r.presliding_rad is not None]
+    if chosen:
+        print(
+            "presliding length per joint (rad, each fold's training movements; coulomb = the smooth sign), by held-out movement:"
+        )
+        for movement, lengths in dict(chosen).items():
+            print(f"  {movement:<40} " + " ".join("coulomb" if v is None else f"{v:.1e}" for v in lengths))
     if implied_gains:
         mean = np.mean(list(implied_gains.values()), axis=0)
         print(

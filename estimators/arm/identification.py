@@ -32,6 +32,7 @@ from estimators.arm.gains import identify_gains, scaled_rows
 from estimators.arm.linear_ls import group_weighted
 from estimators.arm.linear_problem import LinearIdentificationProblem
 from estimators.arm.model import ArmIdentificationModel, IdentificationRows
+from estimators.arm.presliding_choice import choose_for_rows, presliding_for_movements, with_presliding
 from estimators.base import Estimator
 from estimators.estimate import Estimate
 from spaceid_gym.arm.joint_log import ArmLog
@@ -255,7 +256,8 @@ class CrossValidationRow:
 
     ``cost_excess_over_sdp``: a consistent colony's training cost over the ``sdp`` optimum of the same cost, relative
     (``extra["cost_excess_over_sdp"]``), else ``None``. ``torque_constants_Nm_A``: the gains identified on the training
-    movements (``gain_reference`` of :func:`leave_one_out`), else ``None``.
+    movements (``gain_reference`` of :func:`leave_one_out`), else ``None``. ``presliding_rad``: per joint the presliding
+    length chosen on the training movements (``None`` for a joint that keeps the smooth sign), with ``presliding``.
     """
 
     model: str
@@ -266,6 +268,7 @@ class CrossValidationRow:
     n_evaluations: float
     cost_excess_over_sdp: float | None = None
     torque_constants_Nm_A: list[float] | None = None
+    presliding_rad: list[float | None] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready."""
@@ -277,6 +280,7 @@ class CrossValidationRow:
             "n_evaluations": self.n_evaluations,
             "cost_excess_over_sdp": self.cost_excess_over_sdp,
             "torque_constants_Nm_A": self.torque_constants_Nm_A,
+            "presliding_rad": self.presliding_rad,
             **self.error.to_dict(),
         }
 
@@ -297,6 +301,7 @@ def leave_one_out(
     noise_floors: Mapping[str, FloatArray | None] | None = None,
     executor: ExecutorSpec | None = None,
     gain_reference: str | None = None,
+    presliding: Sequence[str] = (),
 ) -> list[CrossValidationRow]:
     """For every movement, model and estimator: fit on the other movements, error on the held-out one.
 
@@ -312,12 +317,20 @@ def leave_one_out(
         executor: where the folds run (:mod:`spaceid_gym.executors`).
         gain_reference: identify the torque constants on each fold's training movements with this reference
             (:func:`estimators.arm.gains.identify_gains`), then fit with them; ``None``: the model's constants.
+        presliding: labels of ``models`` given presliding friction: each fold chooses per joint a presliding length
+            or the smooth sign on its training movements (:mod:`estimators.arm.presliding_choice`).
     """
     if len(logs) < 2:
         raise SpaceIdInputError(f"leave-one-out: needs at least two movements, got {list(logs)}")
+    unknown = [label for label in presliding if label not in models]
+    if unknown:
+        raise SpaceIdInputError(f"leave-one-out: presliding for unknown model(s) {unknown}; models {list(models)}")
+    if presliding and gain_reference is not None:
+        raise SpaceIdInputError("--presliding and --identify-gains: not available together (the gains rescale the rows)")
     model_rows = {label: preparation.all_rows(model, logs) for label, model in models.items()}
+    dahl = {label: presliding_for_movements(models[label], logs, preparation) for label in presliding}
     floors = noise_floors or {}
-    folds = [_Fold(held, dict(models), model_rows, dict(estimators), floors.get(held), gain_reference) for held in logs]
+    folds = [_Fold(held, dict(models), model_rows, dict(estimators), floors.get(held), gain_reference, dahl) for held in logs]
     results = run_jobs(_run_fold, folds, executor or ExecutorSpec("serial"), desc="cross-validate", unit="fold")
     return [row for rows in results for row in rows]
 
@@ -332,6 +345,7 @@ class _Fold:
     estimators: dict[str, Estimator]
     noise_floor: FloatArray | None
     gain_reference: str | None = None
+    presliding: dict[str, dict[str, FloatArray]] = field(default_factory=dict)
 
 
 def _run_fold(fold: _Fold) -> list[CrossValidationRow]:
@@ -340,7 +354,12 @@ def _run_fold(fold: _Fold) -> list[CrossValidationRow]:
     for model_label, model in fold.models.items():
         movements = fold.model_rows[model_label]
         train = {name: item for name, item in movements.items() if name != fold.held}
-        held, gains = movements[fold.held], None
+        held, gains, lengths = movements[fold.held], None, None
+        if model_label in fold.presliding:
+            columns = fold.presliding[model_label]
+            choice = choose_for_rows(model, train, columns)
+            train = {name: with_presliding(model, item, columns[name], choice) for name, item in train.items()}
+            held, lengths = with_presliding(model, held, columns[fold.held], choice), choice.lengths_rad
         if fold.gain_reference is not None:
             found = identify_gains(model, train, fold.gain_reference)
             train, held = scaled_rows(train, found.correction), scaled_rows({fold.held: held}, found.correction)[fold.held]
@@ -358,6 +377,7 @@ def _run_fold(fold: _Fold) -> list[CrossValidationRow]:
                     estimate.n_evaluations,
                     estimate.extra.get("cost_excess_over_sdp"),
                     gains,
+                    lengths,
                 )
             )
     return rows
