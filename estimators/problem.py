@@ -423,24 +423,34 @@ def _derived_with_std(
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     """Physical quantities and their std by the delta method (central differences in range units).
 
-    A quantity that depends on a non-identifiable parameter is reported as ``None`` (value and std).
+    A quantity that depends on a non-identifiable parameter is reported as ``None`` (value and std). A quantity that
+    a step of the differences leaves undefined (a payload's centre of mass where its mass crosses zero) keeps its
+    value, with the std ``None``.
     """
     values = params.physical(theta)
     keys = list(values)
+    sizes = [np.atleast_1d(np.asarray(values[k], dtype=float)).size for k in keys]
+    undefined: set[str] = set()
 
-    def flatten(quantities: dict[str, Any]) -> list[FloatArray]:
-        return [np.atleast_1d(np.asarray(quantities[k], dtype=float)).ravel() for k in keys]
+    def flatten(quantities: dict[str, Any]) -> FloatArray:
+        missing = {k for k in keys if k not in quantities}
+        undefined.update(missing)
+        parts = [
+            np.full(n, np.nan) if k in missing else np.atleast_1d(np.asarray(quantities[k], dtype=float)).ravel()
+            for k, n in zip(keys, sizes, strict=True)
+        ]
+        return np.concatenate(parts)
 
-    flat = flatten(values)
-    sizes = [f.size for f in flat]
+    flat_all = flatten(values)
+    flat = np.split(flat_all, np.cumsum(sizes)[:-1])
     step = 1e-6
     columns = []
     for j in range(len(theta)):
         delta = np.zeros_like(theta)
         delta[j] = step * width[j]
-        plus = np.concatenate(flatten(params.physical(theta + delta)))
-        minus = np.concatenate(flatten(params.physical(theta - delta)))
-        columns.append((plus - minus) / (2.0 * step))  # per unit of the scaled parameter
+        plus = flatten(params.physical(theta + delta))
+        minus = flatten(params.physical(theta - delta))
+        columns.append(np.nan_to_num((plus - minus) / (2.0 * step)))  # per unit of the scaled parameter
     d_scaled = np.column_stack(columns)  # (n_derived, k)
     # marginal covariance of the identifiable parameters (pseudo-inverse: uninformed directions dropped)
     cov = np.linalg.pinv(scaled_fisher, rcond=1e-9, hermitian=True)[np.ix_(identifiable, identifiable)]
@@ -459,5 +469,8 @@ def _derived_with_std(
             physical[key], physical_std[key] = None, None
             continue
         physical[key] = float(value[0]) if shape == () else value.reshape(shape)
+        if key in undefined:
+            physical_std[key] = None
+            continue
         physical_std[key] = float(std_flat[part][0]) if shape == () else std_flat[part].reshape(shape)
     return physical, physical_std

@@ -202,3 +202,17 @@ def test_a_fit_with_the_tank_mirrored_is_a_local_minimum_its_mirror_images_leave
     refits = [polish.polish(problem, image).theta for image in problem.parameters.mirror_images(stuck)]
     best = min(refits, key=lambda theta: problem.cost(theta, count=False)[0])
     assert np.allclose(best, fuel, atol=1e-6)
+
+
+def test_an_estimate_whose_payload_mass_sits_at_zero_reports_its_centre_without_a_std(paper6: Robot) -> None:
+    """A fit with the payload's mass at its lower bound (a payload candidate restarted by a global search on a log
+    without one, held-out seeds 9791-9809): the differences for the derived quantities step across zero mass, where a
+    payload has no centre of mass. The estimate is made (it raised a KeyError), and the centre's std is ``None``
+    rather than a number from an undefined quantity."""
+    model = IdentificationModel(paper6, "fuel", effects=["payload"])
+    problem = model.problem(_noise_free_log(paper6, steps=100, fuel_kg=20.0, tank_m=(0.1, 0.0, 0.0)))
+    theta = np.concatenate(([20.0, 0.1, 0.0, 0.0], np.zeros(10)))
+    theta[4] = 1e-9  # the payload's mass, kg, within one difference step of zero
+    theta[[8, 10, 13]] = 1e-12
+    estimate = problem.make_estimate(theta, estimator="test", options={}, seed=None, cost_history=[0.0], wall_time_s=0.0)
+    assert "payload_com_m" in estimate.physical and estimate.physical_std["payload_com_m"] is None
