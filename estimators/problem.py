@@ -450,8 +450,14 @@ def _derived_with_std(
         delta[j] = step * width[j]
         plus = flatten(params.physical(theta + delta))
         minus = flatten(params.physical(theta - delta))
-        columns.append(np.nan_to_num((plus - minus) / (2.0 * step)))  # per unit of the scaled parameter
+        columns.append((plus - minus) / (2.0 * step))  # per unit of the scaled parameter
     d_scaled = np.column_stack(columns)  # (n_derived, k)
+    # the rows of a quantity undefined at some step carry no derivative (their std is None below); a NaN anywhere else
+    # is an error of the parameterisation's physical quantities and stays one
+    offsets = np.cumsum([0, *sizes])
+    for index, key in enumerate(keys):
+        if key in undefined:
+            d_scaled[offsets[index] : offsets[index + 1]] = 0.0
     # marginal covariance of the identifiable parameters (pseudo-inverse: uninformed directions dropped)
     cov = np.linalg.pinv(scaled_fisher, rcond=1e-9, hermitian=True)[np.ix_(identifiable, identifiable)]
     d_informed = d_scaled[:, identifiable]

@@ -287,7 +287,7 @@ def run_arm_identify(args: argparse.Namespace) -> None:
     if not train:
         raise SpaceIdInputError("--train: no training movement left (every movement is in --validate)")
     model = _model(args)
-    presliding = getattr(args, "presliding", False)
+    presliding = args.presliding
     if presliding:
         check_presliding_model(model)
         if args.identify_gains:
@@ -367,7 +367,7 @@ def run_arm_cross_validate(args: argparse.Namespace) -> None:
     preparation, logs, floors = _movements(args, _names(args.movements))
     specs = parse_estimator_specs(args.estimators)
     estimators = {spec: estimator_from_spec(spec, seed=args.seed) for spec in specs}
-    presliding = getattr(args, "presliding", False)
+    presliding = args.presliding
     label = (args.friction if parse_friction(args.friction) else "no friction") + (" + armature" if args.armature else "")
     label += " + presliding" if presliding else ""
     models = {f"with {label}": _model(args)}

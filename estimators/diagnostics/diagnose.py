@@ -317,7 +317,7 @@ def _profiled_baseline(
     baseline stopped short of its optimum hands every candidate the difference, since each candidate starts from it
     with its effect off: on held-out clean log 9737 (``paper6``, an exact attitude at 100 Hz) the two passes made
     before left the baseline 26 units above its optimum, every candidate gained 26-46 units in the attitude channel
-    alone, and a delay was named (likelihood ratio 26.4); the third pass took the 26 units, the fourth 0.1."""
+    alone, and a delay was named (likelihood ratio 26.4); with the passes until none gains, its ratio is 0.3."""
     sigma2 = weights.gyro_std_rad_s**2
     reference = weights.attitude  # any fixed error model: the log-determinant it subtracts cancels between passes
     best, best_weights, best_value = baseline, weights, math.inf
@@ -363,8 +363,8 @@ def _restart_the_closest(
 
     Not the closest alone: the verdict weighs the closest against its nearest rival, and a rival left in a local
     minimum loses that comparison whatever its effect. On held-out log 9748 (``orbit7``, a 5" tracker, a momentum)
-    the momentum's fit stopped at 4007 chi-square units of the gyro on 3600 values, a gyro bias was closest (3736) and
-    was named; restarted as well, the momentum's fit reached 3638 and was named.
+    the momentum's local fit stopped short (likelihood ratio 23809 against the gyro bias's 24212) and the bias was named;
+    restarted as well, the momentum's ratio became 25231 against 24853 and it was named.
 
     The candidates' fits are local, from the baseline and the term's own starts. When the missing effect is strong, the
     baseline is far off and a local fit can stop in another basin of the model's own unknowns: a 0.27 N m s momentum

@@ -1,0 +1,72 @@
+"""One log of the variation matrix diagnosed, with what explains its verdict: the figures quoted for single held-out
+logs in docs/results.md (Variation matrix).
+
+Prints the log's axes, the verdict and its reason, and per candidate the likelihood ratio split into the gyro's and
+the attitude channel's gains and any reason it was judged implausible. With ``--delay-at-truth`` (a ``delay`` log):
+the delay that fits best with every other unknown at the truth, and the residual at the true delay over the noise, at
+the log's own rate and at 50 and 100 Hz (the same draw, the rate changed).
+
+    python benchmarks/diagnose_case.py none 9737
+    python benchmarks/diagnose_case.py delay 9759 --delay-at-truth
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+from estimators.diagnostics.diagnose import candidate_model, diagnose
+from estimators.diagnostics.workflow import true_parameters
+from estimators.problem import IdentificationModel
+from spaceid_gym.variations import draw_variation, simulate_variation, truth_of
+
+
+def delay_at_truth(seed: int, rate_hz: int | None, duration_s: float) -> str:
+    """The best delay (others at the truth) and the residual RMS at the true delay over the gyro's noise."""
+    fixed = None if rate_hz is None else {"rate_hz": rate_hz}
+    case = draw_variation("delay", seed, fixed)
+    env = simulate_variation(case, duration_s)
+    extended = candidate_model(IdentificationModel(env.robot, "fuel"), "delay")
+    theta = true_parameters(extended, truth_of(env))
+    assert theta is not None
+    problem = extended.problem(env.measurement_log())
+    noise = env.sensors.gyro_std_rad_s(env.control_period_s)
+
+    def rms(delay_s: float) -> float:
+        residual = problem.residuals(np.r_[theta[:-1], delay_s], count=False)
+        return float(np.sqrt(np.mean(residual * residual)))
+
+    best = minimize_scalar(rms, bounds=(0.0, 2.0 * theta[-1]), method="bounded", options={"xatol": 1e-6})
+    return (
+        f"{case.rate_hz:>3} Hz: true delay {1e3 * theta[-1]:.2f} ms, best {1e3 * best.x:.2f} ms; "
+        f"RMS / noise at the true delay {rms(theta[-1]) / noise:.2f}, at the best {best.fun / noise:.2f}"
+    )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("effect", help="the hidden effect of the matrix row (none: a clean log)")
+    parser.add_argument("seed", type=int)
+    parser.add_argument("--seconds", type=float, default=60.0, help="the log's length (the matrix's: 60 s)")
+    parser.add_argument("--delay-at-truth", action="store_true", help="a delay log: the delay that fits best at the truth")
+    args = parser.parse_args()
+    case = draw_variation(args.effect, args.seed)
+    print(f"{args.effect} {args.seed}: {case.robot}, {case.rate_hz} Hz, {case.attitude}, noise x{case.noise_scale:.2f}")
+    env = simulate_variation(case, args.seconds)
+    d = diagnose(IdentificationModel(env.robot, "fuel"), env.measurement_log())
+    print(f"verdict {d.verdict}: {d.reason}")
+    b, sigma2 = d.baseline, d.noise_std_rad_s**2
+    for c in sorted(d.candidates, key=lambda f: -f.lr_statistic):
+        gyro = (b.rss - c.rss) / sigma2
+        attitude = (b.attitude_chi2 or 0.0) - (c.attitude_chi2 or 0.0)
+        why = "; ".join(c.implausible)
+        print(f"  {c.effect:17s} LR {c.lr_statistic:9.1f}  gyro {gyro:9.1f}  attitude {attitude:8.1f}  {why}")
+    if args.delay_at_truth:
+        for rate in (None, 50, 100):
+            print(delay_at_truth(args.seed, rate, args.seconds))
+
+
+if __name__ == "__main__":
+    main()
