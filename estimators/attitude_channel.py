@@ -344,6 +344,15 @@ class AttitudeChannel:
         ``noise``."""
         return noise.whiten(self._in_axes(self.differences(theta)), self._factors(noise)).ravel()
 
+    def moved_chi2(self, other: AttitudeChannel, theta: FloatArray, noise: AttitudeNoise) -> float:
+        """How much ``other`` (this log's channel at another reference) moves the residual at ``theta`` (k,): the
+        squared norm of the change of :meth:`residuals`, whitened as here under ``noise``. Its square root bounds the
+        shift the change can cause in a fit of both channels, in that fit's standard deviations (the shift's norm in
+        the joint information, at most the attitude's, is at most the change's projection on the attitude's Jacobian)."""
+        change = other.differences(theta) - self.differences(theta)
+        whitened = noise.whiten(self._in_axes(change), self._factors(noise))
+        return float(np.sum(whitened * whitened))
+
     def difference_jacobian(self, theta: FloatArray) -> FloatArray:
         """``d differences / d theta`` (T-1, 3, k) at ``theta`` (k,)."""
         n_t = len(self.measured)

@@ -346,11 +346,17 @@ def _rereferenced(
     of the distance. A gyro measurement effect pulls the gyro-alone fit far off: on held-out log 9762 (``quick3``, an
     exact attitude at 50 Hz, an 18.6 ms delay) the gyro alone put the fuel at 9.85 kg for 15.74 kg, the two-channel
     fits sat near the truth, and the error left from 6 kg away moved the delay's fuel by 1.9 g, 7.7 of its Cramér-Rao
-    std (0.25 g with that attitude); referenced at the truth, 0.14 g."""
+    std (0.25 g with that attitude); referenced at the truth, 0.14 g.
+
+    The channel is kept when moving its reference changes the baseline's whitened residual by less than
+    :data:`MIN_STEP_GAIN_CHI2` (:meth:`~estimators.attitude_channel.AttitudeChannel.moved_chi2`): no fit of both
+    channels could then move by more than a quarter of its standard deviation."""
     if weights.reference is not None and np.array_equal(baseline.theta, weights.reference):
         return channel, baseline, weights
     moved = AttitudeChannel.of(model, log, channel.coupling, baseline.theta)
     assert moved is not None
+    if channel.moved_chi2(moved, baseline.theta, weights.attitude) < MIN_STEP_GAIN_CHI2:
+        return channel, baseline, weights  # no fit could move by a quarter of its std (a clean log's baseline)
     weights = replace(weights, reference=moved.reference, axes=moved.axes)
     baseline, weights = _profiled_baseline(model, log, baseline, weights, moved)
     return moved, baseline, weights
