@@ -71,6 +71,9 @@ def test_hidden_gyro_bias_is_named_and_adding_it_brings_the_errors_back(paper6: 
     assert result.after is not None and result.applied == "gyro_bias"
     assert np.all(result.after.analysis.rms_over_noise < 1.1)
     assert result.errors_after is not None and np.all(np.abs(result.errors_after.z) < 4.0)
+    # before is the model as given, as the diagnosis fitted it to both channels, with both channels' bound
+    assert d.weights is not None and "attitude_noise" in result.estimate_before.options
+    np.testing.assert_array_equal(result.estimate_before.theta, d.baseline.theta)
     page = write_report(result, tmp_path / "report.html")
     html = page.read_text()
     assert "data:image/png;base64," in html and "gyro_bias" in html and "Which effect is missing" in html

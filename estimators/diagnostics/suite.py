@@ -8,7 +8,8 @@ and no method could see it), realistic gyro noise, a fuel state drawn as in the 
 the effect hidden in the truth at its default magnitude (random direction, :func:`spaceid_gym.effects.draw_effect`);
 run :func:`~estimators.diagnostics.diagnose.diagnose` on the paper's ``fuel`` model; when the verdict names
 an effect, add it and measure the residual RMS against the simulated gyro noise and the fuel unknowns'
-errors in Cramér-Rao standard deviations, before and after (``z_*``: the bound at the true parameters, as in
+errors in Cramér-Rao standard deviations, before and after (the diagnosis's fits of the model as given and with the
+named effect, each on the gyro and the attitude where the diagnosis weighed both; ``z_*``: the bound at the true parameters, as in
 :mod:`estimators.evaluation`; ``z_*_at_estimate``: the estimate's own bound, see
 :func:`~estimators.diagnostics.workflow.parameter_errors`).
 
@@ -31,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from estimators.diagnostics.diagnose import NO_MISSING_EFFECT, diagnose
-from estimators.diagnostics.workflow import ParameterErrors, apply_effect, parameter_errors
+from estimators.diagnostics.workflow import ParameterErrors, apply_effect, baseline_estimate, parameter_errors
 from estimators.evaluation import Setting, draw_settings
 from estimators.problem import IdentificationModel
 from spaceid_gym.datasets import simulate_episode
@@ -118,9 +119,7 @@ def diagnosed_cells(env: FreeFloatingIDEnv, effect: str) -> dict[str, Any]:
         "rivals": ";".join(str(f.effect) for f, _ in diagnosis.rivals),
         "rms_over_noise_before": diagnosis.baseline.residual_rms_rad_s / noise,
     }
-    before = None
-    if diagnosis.baseline_estimate is not None:
-        before = parameter_errors(model, log, diagnosis.baseline_estimate, truth)
+    before = parameter_errors(model, log, baseline_estimate(model, log, diagnosis), truth)
     row.update(_z_columns(before, "before"))
     if diagnosis.best is not None:
         extended, estimate = apply_effect(model, log, diagnosis.best.effect or "", diagnosis)

@@ -20,6 +20,7 @@ from estimators.attitude_noise import AttitudeNoise
 from estimators.base import Estimator
 from estimators.diagnostics.compare import Comparison, compare
 from estimators.diagnostics.diagnose import Diagnosis, candidate_model, diagnose
+from estimators.diagnostics.model_fit import ChannelWeights, ModelFit
 from estimators.diagnostics.plots import plot_before_after, plot_correlations, plot_overlay, plot_ranking, plot_residuals
 from estimators.diagnostics.report import HtmlReport
 from estimators.estimate import Estimate
@@ -46,13 +47,26 @@ def apply_effect(
     """
     fit = None if diagnosis is None else diagnosis.fit_of(effect)
     extended = candidate_model(model, effect if fit is None else fit.spec)  # the variant the diagnosis chose (slosh)
-    if fit is None:
+    if fit is None or diagnosis is None:
         return extended, (estimator or make_estimator("hybrid")).fit(extended, log)
-    problem = extended.problem(log)
-    options: dict[str, Any] = {"from": "the candidate's least-squares fit in the diagnosis"}
+    return extended, fit_estimate(extended, log, fit, diagnosis.weights, "the candidate's least-squares fit in the diagnosis")
+
+
+def baseline_estimate(model: IdentificationModel, log: MeasurementLog, diagnosis: Diagnosis) -> Estimate:
+    """``model`` as given, as the ``diagnosis`` of it on ``log`` fitted it: to the gyro and the attitude where the
+    diagnosis weighed both (its baseline, the fit every candidate is scored against), else to the gyro alone."""
+    return fit_estimate(model, log, diagnosis.baseline, diagnosis.weights, "the baseline's fit in the diagnosis")
+
+
+def fit_estimate(
+    model: IdentificationModel, log: MeasurementLog, fit: ModelFit, weights: ChannelWeights | None, origin: str
+) -> Estimate:
+    """The estimate of ``model``'s ``fit`` on ``log`` (a fit of :func:`~estimators.diagnostics.diagnose.diagnose`),
+    with the bound of both channels under ``weights`` (``None``: the gyro's alone); ``origin`` says which fit."""
+    problem = model.problem(log)
+    options: dict[str, Any] = {"from": origin}
     extra_information = None
-    weights = diagnosis.weights
-    channel = None if weights is None else AttitudeChannel.of(extended, log, weights.coupling, weights.reference)
+    channel = None if weights is None else AttitudeChannel.of(model, log, weights.coupling, weights.reference)
     if channel is not None and weights is not None:
         # fitted to the gyro and the star tracker: the bound is that of both
         options["attitude_noise"] = weights.attitude.to_dict()
@@ -61,7 +75,7 @@ def apply_effect(
         if weights.reference is not None:
             options["attitude_reference"] = [float(v) for v in weights.reference]
         extra_information = channel.fisher(fit.theta, weights.attitude)
-    return extended, problem.make_estimate(
+    return problem.make_estimate(
         fit.theta,
         estimator="diagnose",
         options=options,
@@ -235,8 +249,7 @@ def run_loop(
     std of the best-fitting candidate), so before and after are measured against the same floor.
     """
     diagnosis = diagnose(model, log, candidates=candidates, estimator=estimator)
-    if diagnosis.baseline_estimate is None:
-        raise SpaceIdInputError("run_loop: the diagnosis did not keep the baseline estimate")
+    estimate_before = baseline_estimate(model, log, diagnosis)
     floor = noise_std_rad_s if noise_std_rad_s is not None else diagnosis.noise_std_rad_s
     before = compare(model, log, diagnosis.baseline.theta, floor, label=model.parameters.name)
     effect = diagnosis.best.effect if apply == "best" and diagnosis.best is not None else (None if apply == "best" else apply)
@@ -248,12 +261,10 @@ def run_loop(
     errors = (None, None)
     if truth is not None:
         errors = (
-            parameter_errors(model, log, diagnosis.baseline_estimate, truth),
+            parameter_errors(model, log, estimate_before, truth),
             None if estimate_after is None else parameter_errors(extended, log, estimate_after, truth),
         )
-    return LoopResult(
-        model, diagnosis, before, effect, after, diagnosis.baseline_estimate, estimate_after, truth, errors[0], errors[1]
-    )
+    return LoopResult(model, diagnosis, before, effect, after, estimate_before, estimate_after, truth, errors[0], errors[1])
 
 
 def write_report(result: LoopResult, path: str | Path, title: str = "Model against measurements") -> Path:
