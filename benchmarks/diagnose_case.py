@@ -1,8 +1,10 @@
 """One log of the variation matrix diagnosed, with what explains its verdict: the figures quoted for single held-out
 logs in docs/results.md (Variation matrix).
 
-Prints the log's axes, the verdict and its reason, and per candidate the likelihood ratio split into the gyro's and
-the attitude channel's gains and any reason it was judged implausible. With ``--delay-at-truth`` (a ``delay`` log):
+Prints the log's axes, the verdict and its reason, per candidate the likelihood ratio split into the gyro's and
+the attitude channel's gains and any reason it was judged implausible, and the fuel unknowns' errors (and z, in
+Cramér-Rao std at the truth) of the gyro-alone fit, of the model as given fitted by the diagnosis and of the named
+effect's fit. With ``--delay-at-truth`` (a ``delay`` log):
 the delay that fits best with every other unknown at the truth, and the residual at the true delay over the noise, at
 the log's own rate and at 50 and 100 Hz (the same draw, the rate changed).
 
@@ -18,7 +20,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from estimators.diagnostics.diagnose import candidate_model, diagnose
-from estimators.diagnostics.workflow import true_parameters
+from estimators.diagnostics.workflow import ParameterErrors, apply_effect, baseline_estimate, parameter_errors, true_parameters
 from estimators.problem import IdentificationModel
 from spaceid_gym.variations import draw_variation, simulate_variation, truth_of
 
@@ -45,6 +47,13 @@ def delay_at_truth(seed: int, rate_hz: int | None, duration_s: float) -> str:
     )
 
 
+def _errors_text(label: str, errors: ParameterErrors | None) -> str:
+    if errors is None:
+        return f"{label}: no fuel unknowns"
+    pairs = ", ".join(f"{n} {e:+.4g} (z {z:+.2f})" for n, e, z in zip(errors.names, errors.error, errors.z, strict=True))
+    return f"{label}: {pairs}"
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("effect", help="the hidden effect of the matrix row (none: a clean log)")
@@ -55,7 +64,8 @@ def main() -> None:
     case = draw_variation(args.effect, args.seed)
     print(f"{args.effect} {args.seed}: {case.robot}, {case.rate_hz} Hz, {case.attitude}, noise x{case.noise_scale:.2f}")
     env = simulate_variation(case, args.seconds)
-    d = diagnose(IdentificationModel(env.robot, "fuel"), env.measurement_log())
+    model, log, truth = IdentificationModel(env.robot, "fuel"), env.measurement_log(), truth_of(env)
+    d = diagnose(model, log)
     print(f"verdict {d.verdict}: {d.reason}")
     b, sigma2 = d.baseline, d.noise_std_rad_s**2
     for c in sorted(d.candidates, key=lambda f: -f.lr_statistic):
@@ -63,6 +73,12 @@ def main() -> None:
         attitude = (b.attitude_chi2 or 0.0) - (c.attitude_chi2 or 0.0)
         why = "; ".join(c.implausible)
         print(f"  {c.effect:17s} LR {c.lr_statistic:9.1f}  gyro {gyro:9.1f}  attitude {attitude:8.1f}  {why}")
+    assert d.baseline_estimate is not None
+    print(_errors_text("gyro-alone fit", parameter_errors(model, log, d.baseline_estimate, truth)))
+    print(_errors_text("model as given", parameter_errors(model, log, baseline_estimate(model, log, d), truth)))
+    if d.best is not None and d.best.effect is not None:
+        extended, estimate = apply_effect(model, log, d.best.effect, d)
+        print(_errors_text(f"with {d.best.effect}", parameter_errors(extended, log, estimate, truth)))
     if args.delay_at_truth:
         for rate in (None, 50, 100):
             print(delay_at_truth(args.seed, rate, args.seconds))
