@@ -553,3 +553,14 @@ def test_the_attitude_channel_takes_its_integration_error_out_at_the_two_channel
     std = extended.problem(log).crlb_std(truth, d.weights.gyro_std_rad_s, information)[:4]
     shift = np.abs(fit.theta[:4] - refit.theta[:4]) / std
     assert np.max(shift) < 0.2, shift
+    # referenced at the gyro-alone fit, as before, the fit moves by several std, and by no more than the bound of
+    # moved_chi2 (the diagnosis's rule for keeping a channel)
+    assert d.baseline_estimate is not None
+    gyro_alone = d.baseline_estimate.theta
+    before = dataclasses.replace(d.weights, reference=gyro_alone)
+    old = fit_model(extended, log, starts=[fit.theta], effect="delay", weights=before, profile_noise=True)[0]
+    old_channel = AttitudeChannel.of(extended, log, d.weights.coupling, gyro_alone)
+    assert old_channel is not None
+    moved = old_channel.moved_chi2(channel, fit.theta, fit.attitude_noise)
+    old_shift = np.abs(old.theta[:4] - fit.theta[:4]) / std
+    assert 1.0 < np.max(old_shift) <= math.sqrt(moved), (old_shift, moved)
