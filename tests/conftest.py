@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import warnings
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from spaceid_gym.cli import main
 from spaceid_gym.datasets import simulate_episode
 from spaceid_gym.excitation import FourierExcitation
 from spaceid_gym.log import MeasurementLog
@@ -53,3 +56,36 @@ def fuel_episode(paper6: Robot) -> FuelEpisode:
 def short_fuel_episode(paper6: Robot) -> FuelEpisode:
     """As :func:`fuel_episode` but 20 s (1001 samples), for quick checks."""
     return _fuel_episode(paper6, 20.0, seed=1)
+
+
+@dataclass(frozen=True)
+class CliRun:
+    """What one ``spaceid`` command left: its exit code and what it printed."""
+
+    returncode: int
+    stdout: str
+    stderr: str
+
+
+@pytest.fixture
+def spaceid(capsys: pytest.CaptureFixture[str]) -> Callable[..., CliRun]:
+    """Runs ``spaceid ARGS`` in this process, as ``python -m spaceid_gym.cli ARGS`` runs it, without the 4 s import
+    of a new interpreter. An exception the command does not handle propagates (the test fails, as a traceback would);
+    argparse's usage errors end in SystemExit, whose code is the exit code; a warning the command emits is appended
+    to ``stderr``, where the interpreter prints it. Tests of the interpreter's own output (``-m``, import-time
+    messages) keep a subprocess."""
+
+    def run(*args: str) -> CliRun:
+        capsys.readouterr()
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("default")
+            try:
+                code: object = main(list(args))
+            except SystemExit as exc:
+                code = exc.code
+        out, err = capsys.readouterr()
+        err += "".join(warnings.formatwarning(w.message, w.category, w.filename, w.lineno) for w in caught)
+        assert isinstance(code, int), code
+        return CliRun(code, out, err)
+
+    return run

@@ -1,11 +1,11 @@
-"""The ``spaceid`` command: dataset folders and clear errors without tracebacks."""
+"""The ``spaceid`` command (run in this process): dataset folders and clear errors without tracebacks."""
 
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -64,21 +64,10 @@ def test_simulate_is_deterministic(tmp_path: Path) -> None:
         (["--rate", "0"], "--rate"),
     ],
 )
-def test_bad_input_exits_non_zero_without_traceback(tmp_path: Path, args: list[str], message: str) -> None:
-    command = [
-        sys.executable,
-        "-m",
-        "spaceid_gym.cli",
-        "simulate",
-        "--robot",
-        "quick3",
-        "--duration",
-        "1",
-        "--out",
-        str(tmp_path / "x"),
-        *args,
-    ]
-    result = subprocess.run(command, capture_output=True, text=True, timeout=120)
+def test_bad_input_exits_non_zero_without_traceback(
+    tmp_path: Path, spaceid: Callable[..., Any], args: list[str], message: str
+) -> None:
+    result = spaceid("simulate", "--robot", "quick3", "--duration", "1", "--out", str(tmp_path / "x"), *args)
     assert result.returncode == 2
     assert message in result.stderr
     assert "Traceback" not in result.stderr
@@ -102,13 +91,8 @@ _JOINT = '<joint name="j1" type="{jtype}"><parent link="base"/><child link="l1"/
         (f'<robot name="r">{_BASE}{_ARM.format(ixx=1)}{_JOINT.format(jtype="prismatic")}</robot>', "type 'prismatic'"),
     ],
 )
-def test_bad_urdf_is_reported(tmp_path: Path, urdf: str, message: str) -> None:
+def test_bad_urdf_is_reported(tmp_path: Path, spaceid: Callable[..., Any], urdf: str, message: str) -> None:
     path = tmp_path / "bad.urdf"
     path.write_text(urdf)
-    result = subprocess.run(
-        [sys.executable, "-m", "spaceid_gym.cli", "simulate", "--robot", str(path), "--out", str(tmp_path / "x")],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    result = spaceid("simulate", "--robot", str(path), "--out", str(tmp_path / "x"))
     assert result.returncode == 2 and message in result.stderr and "Traceback" not in result.stderr

@@ -13,9 +13,9 @@ import dataclasses
 import json
 import math
 import re
-import subprocess
-import sys
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -772,11 +772,9 @@ def test_dataset_truth_holds_the_effects(quick3: Robot, tmp_path: Path) -> None:
     assert env.truth()["hidden_effects"] == effects.to_dict()
 
 
-def test_bad_spec_on_the_command_line_exits_2(tmp_path: Path) -> None:
-    command = [sys.executable, "-m", "spaceid_gym.cli", "simulate", "--robot", "quick3", "--duration", "1"]
-    result = subprocess.run(
-        [*command, "--hidden-effects", "slosh[mass=3]", "--out", str(tmp_path / "x")], capture_output=True, text=True, timeout=120
-    )
+def test_bad_spec_on_the_command_line_exits_2(tmp_path: Path, spaceid: Callable[..., Any]) -> None:
+    command = ["simulate", "--robot", "quick3", "--duration", "1"]
+    result = spaceid(*command, "--hidden-effects", "slosh[mass=3]", "--out", str(tmp_path / "x"))
     assert result.returncode == 2 and "Traceback" not in result.stderr
     assert "expected keys magnitude, slosh_mass_kg, slosh_frequency_hz, slosh_damping_ratio" in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -65,20 +65,17 @@ def test_identify_rejects_bad_input_with_a_clear_message(
     assert not out.exists()
 
 
-def test_identify_rejects_a_log_shorter_than_the_estimator_needs(dataset: Path, tmp_path: Path) -> None:
+def test_identify_rejects_a_log_shorter_than_the_estimator_needs(
+    dataset: Path, tmp_path: Path, spaceid: Callable[..., Any]
+) -> None:
     short = tmp_path / "short"
     short.mkdir()
     lines = (dataset / "log.csv").read_text().splitlines()
     (short / "log.csv").write_text("\n".join(lines[:6]) + "\n")  # header and 5 samples
     (short / "robot.urdf").write_text((dataset / "robot.urdf").read_text())
-    command = [sys.executable, "-m", "spaceid_gym.cli", "identify", "--robot", str(short / "robot.urdf")]
+    command = ["identify", "--robot", str(short / "robot.urdf")]
     command += ["--log", str(short / "log.csv"), "--estimator", "improved-pso", "--out", str(tmp_path / "e.json")]
-    result = subprocess.run(
-        command,
-        capture_output=True,
-        text=True,
-        check=False,
-    )
+    result = spaceid(*command)
     assert result.returncode == 2
     assert "Traceback" not in result.stderr
     assert "5 samples is shorter than the estimator 'improved-pso' needs" in result.stderr
