@@ -73,8 +73,8 @@ def main() -> None:
         attitude = (b.attitude_chi2 or 0.0) - (c.attitude_chi2 or 0.0)
         why = "; ".join(c.implausible)
         print(f"  {c.effect:17s} LR {c.lr_statistic:9.1f}  gyro {gyro:9.1f}  attitude {attitude:8.1f}  {why}")
-    assert d.baseline_estimate is not None
-    print(_errors_text("gyro-alone fit", parameter_errors(model, log, d.baseline_estimate, truth)))
+    assert d.gyro_alone_estimate is not None
+    print(_errors_text("gyro-alone fit", parameter_errors(model, log, d.gyro_alone_estimate, truth)))
     print(_errors_text("model as given", parameter_errors(model, log, baseline_estimate(model, log, d), truth)))
     if d.best is not None and d.best.effect is not None:
         extended, estimate = apply_effect(model, log, d.best.effect, d)

@@ -347,8 +347,10 @@ class AttitudeChannel:
     def moved_chi2(self, other: AttitudeChannel, theta: FloatArray, noise: AttitudeNoise) -> float:
         """How much ``other`` (this log's channel at another reference) moves the residual at ``theta`` (k,): the
         squared norm of the change of :meth:`residuals`, whitened as here under ``noise``. Its square root bounds the
-        shift the change can cause in a fit of both channels, in that fit's standard deviations (the shift's norm in
-        the joint information, at most the attitude's, is at most the change's projection on the attitude's Jacobian)."""
+        shift the change can cause in a fit of both channels at ``theta``, in that fit's standard deviations: to first
+        order, with the error model held, the shift's norm in the joint information is at most the change's projection
+        on the attitude's Jacobian, since the joint information is at least the attitude's. It bounds the unknowns'
+        shift, not a likelihood ratio's (that moves by up to about twice the change's norm times the residuals')."""
         change = other.differences(theta) - self.differences(theta)
         whitened = noise.whiten(self._in_axes(change), self._factors(noise))
         return float(np.sum(whitened * whitened))

@@ -39,8 +39,8 @@ from estimators.attitude_noise import (
     _whitened_terms,
     fit_attitude_noise,
 )
+from estimators.diagnostics.baseline import REREFERENCE_CHI2
 from estimators.diagnostics.diagnose import (
-    MIN_STEP_GAIN_CHI2,
     NO_MISSING_EFFECT,
     ModelFit,
     attitude_gyro_dependence,
@@ -49,6 +49,7 @@ from estimators.diagnostics.diagnose import (
     fit_model,
     low_frequency_p_value,
 )
+from estimators.diagnostics.model_fit import MIN_STEP_GAIN_CHI2
 from estimators.diagnostics.suite import DIAGNOSTIC_EXCITATION, diagnosed_cells
 from estimators.diagnostics.workflow import true_parameters
 from estimators.problem import IdentificationModel
@@ -555,8 +556,8 @@ def test_the_attitude_channel_takes_its_integration_error_out_at_the_two_channel
     assert np.max(shift) < 0.2, shift
     # referenced at the gyro-alone fit, as before, the fit moves by several std, and by no more than the bound of
     # moved_chi2 (the diagnosis's rule for keeping a channel)
-    assert d.baseline_estimate is not None
-    gyro_alone = d.baseline_estimate.theta
+    assert d.gyro_alone_estimate is not None
+    gyro_alone = d.gyro_alone_estimate.theta
     before = dataclasses.replace(d.weights, reference=gyro_alone)
     old = fit_model(extended, log, starts=[fit.theta], effect="delay", weights=before, profile_noise=True)[0]
     old_channel = AttitudeChannel.of(extended, log, d.weights.coupling, gyro_alone)
@@ -564,3 +565,26 @@ def test_the_attitude_channel_takes_its_integration_error_out_at_the_two_channel
     moved = old_channel.moved_chi2(channel, fit.theta, fit.attitude_noise)
     old_shift = np.abs(old.theta[:4] - fit.theta[:4]) / std
     assert 1.0 < np.max(old_shift) <= math.sqrt(moved), (old_shift, moved)
+
+
+def test_a_clean_logs_channel_keeps_its_reference_at_the_gyro_alone_fit() -> None:
+    """On a clean log (20 s of 9762, an exact attitude) the two-channel baseline sits where the gyro alone put it, to
+    well within its std: moving the channel's reference would change its residual by less than REREFERENCE_CHI2, so
+    the channel is kept (no second profile of the baseline), and the fuel unknowns of a fit under a channel moved to
+    the baseline differ by less than a quarter of a std."""
+    env = simulate_variation(draw_variation("none", 9762), 20.0)
+    model, log = IdentificationModel(env.robot, "fuel"), env.measurement_log()
+    d = diagnose(model, log, candidates=["delay"])
+    assert d.verdict == NO_MISSING_EFFECT, d.reason
+    assert d.weights is not None and d.weights.reference is not None and d.gyro_alone_estimate is not None
+    np.testing.assert_array_equal(d.weights.reference, d.gyro_alone_estimate.theta)
+    kept = AttitudeChannel.of(model, log, d.weights.coupling, d.weights.reference)
+    moved = AttitudeChannel.of(model, log, d.weights.coupling, d.baseline.theta)
+    assert kept is not None and moved is not None
+    assert kept.moved_chi2(moved, d.baseline.theta, d.weights.attitude) < REREFERENCE_CHI2
+    at_baseline = dataclasses.replace(d.weights, reference=d.baseline.theta)
+    refit = fit_model(model, log, starts=[d.baseline.theta], weights=at_baseline, profile_noise=True)[0]
+    std = model.problem(log).crlb_std(
+        d.baseline.theta, d.weights.gyro_std_rad_s, moved.fisher(d.baseline.theta, d.weights.attitude)
+    )
+    assert np.max(np.abs(refit.theta - d.baseline.theta) / std) < 0.25

@@ -60,7 +60,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -69,9 +69,12 @@ from threadpoolctl import threadpool_limits
 
 from estimators.attitude_channel import AttitudeChannel
 from estimators.base import Estimator
+from estimators.diagnostics.baseline import profiled_baseline, rereferenced
 from estimators.diagnostics.model_fit import EXPLAINED_FRACTION as EXPLAINED_FRACTION
+
+# the public names of the fit and the verdict, importable from here as before the split
+from estimators.diagnostics.model_fit import CandidateScores as CandidateScores
 from estimators.diagnostics.model_fit import (
-    MIN_STEP_GAIN_CHI2,
     ChannelWeights,
     ModelFit,
     best_of_grid,
@@ -80,9 +83,6 @@ from estimators.diagnostics.model_fit import (
     independent_attitude_channel,
     nuisance_basis,
 )
-
-# the public names of the fit and the verdict, importable from here as before the split
-from estimators.diagnostics.model_fit import CandidateScores as CandidateScores
 from estimators.diagnostics.model_fit import (
     attitude_gyro_dependence as attitude_gyro_dependence,
 )
@@ -115,7 +115,9 @@ class Diagnosis:
 
     Attributes:
         verdict: the missing effect's name, :data:`NO_MISSING_EFFECT` or :data:`UNEXPLAINED`.
-        baseline: the model as given, fitted.
+        baseline: the model as given, fitted (to both channels where ``weights`` is set:
+            :mod:`estimators.diagnostics.baseline`); every candidate is scored against it.
+        gyro_alone_estimate: the estimator's fit of the model to the gyro alone, where the baseline started.
         candidates: one fit per candidate effect: the named one first, then by BIC (lowest first).
         analysis: residual analysis of the baseline fit.
         noise_std_rad_s: the gyro noise std used for the scores (residual std of the best model).
@@ -137,7 +139,7 @@ class Diagnosis:
     alpha: float
     reason: str
     weights: ChannelWeights | None
-    baseline_estimate: Estimate | None = field(default=None, repr=False)
+    gyro_alone_estimate: Estimate | None = field(default=None, repr=False)
     combined: list[ModelFit] = field(default_factory=list)
     attitude_rejected: bool = False
     rivals: list[tuple[ModelFit, float]] = field(default_factory=list)
@@ -241,7 +243,7 @@ def diagnose(
             f"is not what the model assumes, so the verdict rests on the gyro alone; {diagnosis.reason}"
         )
         diagnosis.attitude_rejected = True
-    diagnosis.baseline_estimate = estimate
+    diagnosis.gyro_alone_estimate = estimate
     return diagnosis
 
 
@@ -266,8 +268,8 @@ def _diagnose(
         weights = ChannelWeights(
             white_std, channel.estimate_noise(baseline.theta), channel.coupling, channel.reference, channel.axes
         )
-        baseline, weights = _profiled_baseline(model, log, baseline, weights, channel)
-        channel, baseline, weights = _rereferenced(model, log, baseline, weights, channel)
+        baseline, weights = profiled_baseline(model, log, baseline, weights, channel)
+        channel, baseline, weights = rereferenced(model, log, baseline, weights, channel)
         # the baseline's own error model weights every candidate's fit and is the reference of the log-determinants
         baseline.attitude_chi2 = channel.chi2(baseline.theta, weights.attitude)
     # the baseline's own unknowns, profiled out of every candidate's scan
@@ -299,67 +301,6 @@ def _diagnose(
         reason += f"; but the log hardly tells it from {odds}: both describe it about as well"
     fits.sort(key=lambda f: (f.effect != verdict, f.bic))
     return Diagnosis(verdict, baseline, fits, analysis, sigma, alpha, reason, weights, combined=combined, rivals=close)
-
-
-#: at most this many passes of :func:`_profiled_baseline`
-MAX_BASELINE_PASSES = 8
-
-
-def _profiled_baseline(
-    model: IdentificationModel, log: MeasurementLog, baseline: ModelFit, weights: ChannelWeights, channel: AttitudeChannel
-) -> tuple[ModelFit, ChannelWeights]:
-    """The ``baseline`` refitted on both channels at its profile likelihood's optimum, with the ``weights`` of its own
-    attitude error model.
-
-    Each pass is what every candidate gets from the baseline's state: a fit under the error model of ``weights``, the
-    error model refitted at it, the fit refined (:func:`fit_model` with ``profile_noise``). The passes go on until one
-    lowers ``-2 log L`` of both channels (gyro at ``weights``' white noise, attitude under its refitted error model)
-    by less than :data:`MIN_STEP_GAIN_CHI2`, at most :data:`MAX_BASELINE_PASSES`, and the best pass is kept. A
-    baseline stopped short of its optimum hands every candidate the difference, since each candidate starts from it
-    with its effect off: on held-out clean log 9737 (``paper6``, an exact attitude at 100 Hz) the two passes made
-    before left the baseline 26 units above its optimum, every candidate gained 26-46 units in the attitude channel
-    alone, and a delay was named (likelihood ratio 26.4); with the passes until none gains, its ratio is 0.3."""
-    sigma2 = weights.gyro_std_rad_s**2
-    reference = weights.attitude  # any fixed error model: the log-determinant it subtracts cancels between passes
-    best, best_weights, best_value = baseline, weights, math.inf
-    for _ in range(MAX_BASELINE_PASSES):
-        fit = fit_model(model, log, starts=[best.theta], weights=best_weights, channel=channel, profile_noise=True)[0]
-        assert fit.attitude_noise is not None
-        value = fit.rss / sigma2 + channel.profile_chi2(fit.theta, fit.attitude_noise, reference)
-        gain = best_value - value
-        if gain > 0.0:
-            best, best_value = fit, value
-            best_weights = replace(weights, attitude=fit.attitude_noise)
-        if gain < MIN_STEP_GAIN_CHI2:
-            break
-    return best, best_weights
-
-
-def _rereferenced(
-    model: IdentificationModel, log: MeasurementLog, baseline: ModelFit, weights: ChannelWeights, channel: AttitudeChannel
-) -> tuple[AttitudeChannel, ModelFit, ChannelWeights]:
-    """The attitude channel with its integration error taken out at the two-channel ``baseline``'s unknowns (the
-    channel comes referenced at the gyro-alone fit), and the baseline profiled again under it
-    (:func:`_profiled_baseline`); as they are if the baseline sits at the channel's reference already.
-
-    The midpoint rule's error is carried to first order about the reference, and what is left grows with the square
-    of the distance. A gyro measurement effect pulls the gyro-alone fit far off: on held-out log 9762 (``quick3``, an
-    exact attitude at 50 Hz, an 18.6 ms delay) the gyro alone put the fuel at 9.85 kg for 15.74 kg, the two-channel
-    fits sat near the truth, and the error left from 6 kg away moved the delay's fuel by 1.9 g, 7.7 of its Cramér-Rao
-    std (0.25 g with that attitude); referenced at the truth, 0.14 g.
-
-    The channel is kept when moving its reference changes the baseline's whitened residual by less than
-    :data:`MIN_STEP_GAIN_CHI2` (:meth:`~estimators.attitude_channel.AttitudeChannel.moved_chi2`): no fit of both
-    channels could then move by more than a quarter of its standard deviation."""
-    if weights.reference is not None and np.array_equal(baseline.theta, weights.reference):
-        return channel, baseline, weights
-    moved = AttitudeChannel.of(model, log, channel.coupling, baseline.theta)
-    assert moved is not None
-    if channel.moved_chi2(moved, baseline.theta, weights.attitude) < MIN_STEP_GAIN_CHI2:
-        return channel, baseline, weights  # no fit could move by a quarter of its std (a clean log's baseline)
-    weights = replace(weights, reference=moved.reference, axes=moved.axes)
-    baseline, weights = _profiled_baseline(model, log, baseline, weights, moved)
-    return moved, baseline, weights
 
 
 #: the closest candidate's gyro residual RMS, over the residual's white noise, above which its fit is taken to have
