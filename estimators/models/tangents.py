@@ -157,7 +157,9 @@ def _slope_tangent(
     for c in range(3):
         spring = point[c] + ax * axis[c] + kappa * ax * point[c] if rod else point[c]
         f[c] = -stiff * spring - damp * point[3 + c]
-    g = frame_terms(step, row, point)
+    g = frame_terms(
+        (wx, wy, wz, step[row, 6], step[row, 7], step[row, 8]), (point[0], point[1], point[2]), (point[3], point[4], point[5])
+    )
     for c in range(3):  # C f - b, before the rod's tension
         acc[c] = coupling[c, 0] * f[0] + coupling[c, 1] * f[1] + coupling[c, 2] * f[2] - (step[row, c] + g[c])
         n[c] = axis[c] + kappa * point[c]
