@@ -7,7 +7,7 @@ import pytest
 
 import estimators.problem as problem_module
 from estimators.least_squares import interior_start
-from estimators.models.slosh_dynamics import N_INPUTS, integrate_slosh
+from estimators.models.slosh_dynamics import N_INPUTS, N_LANE_ROWS, integrate_slosh, slosh_momentum
 from estimators.models.tangents import slosh_tangents
 from estimators.problem import IdentificationModel
 
@@ -83,12 +83,48 @@ def test_slosh_tangents_match_complex_steps_through_the_integration(rod: bool) -
     d_inputs = 0.1 * rng.standard_normal((n_k, N_INPUTS))
     d_twist[3:], d_inputs[3:, :4], d_inputs[3:, 7:16] = 0.0, 0.0, 0.0  # the oscillator's own unknowns
     out, d_out, moved, d_moved = slosh_tangents(twist, d_twist, t_s, inputs, d_inputs, rod)
-    c_out, c_moved = np.zeros((n_t, 6), dtype=complex), np.zeros((n_t, 10), dtype=complex)
-    work = np.empty((2 * n_t + 9, 9), dtype=complex)
+    c_out, c_moved = np.zeros((1, n_t, 6), dtype=complex), np.zeros((1, n_t, 10), dtype=complex)
     for q in range(n_k):
-        integrate_slosh(twist + 1j * h * d_twist[q], t_s, inputs + 1j * h * d_inputs[q], rod, c_out, c_moved, work)
-        for value, reference, d_value, d_reference in ((out, c_out, d_out[q], c_out), (moved, c_moved, d_moved[q], c_moved)):
+        lanes = np.zeros((N_LANE_ROWS, 1), dtype=complex)
+        integrate_slosh(
+            (twist + 1j * h * d_twist[q])[None], t_s, (inputs + 1j * h * d_inputs[q])[None], rod, c_out, c_moved, lanes
+        )
+        for value, reference, d_value, d_reference in (
+            (out, c_out[0], d_out[q], c_out[0]),
+            (moved, c_moved[0], d_moved[q], c_moved[0]),
+        ):
             np.testing.assert_allclose(value, reference.real, rtol=0.0, atol=1e-12 * np.abs(reference.real).max())
             scale = np.abs(d_reference.imag / h).max()
             assert scale > 0.0
             np.testing.assert_allclose(d_value, d_reference.imag / h, rtol=0.0, atol=1e-10 * scale)
+
+
+@pytest.mark.parametrize("rod", [False, True])
+def test_slosh_sets_side_by_side_give_each_set_alone(rod: bool) -> None:
+    """The slosh integration of several parameter sets in vector lanes (:func:`slosh_momentum`) gives each set the
+    numbers of its integration alone, to the last bit; a zero divisor of the rod's tension raises, as a division by
+    zero did."""
+    rng = np.random.default_rng(11)
+    n_p, n_t = 11, 300
+    t_s = np.arange(n_t) * 0.02
+    twist = 0.05 * np.sin(2.0 * np.pi * t_s[None, :, None] * rng.uniform(0.05, 0.2, (n_p, 1, 6)))
+    axis = rng.standard_normal((n_p, 3))
+    inputs = np.hstack(
+        (
+            rng.uniform(-0.3, 0.3, (n_p, 3)),
+            rng.uniform(5.0, 30.0, (n_p, 1)),
+            rng.uniform(1.0, 3.0, (n_p, 1)),
+            rng.uniform(0.01, 0.2, (n_p, 1)),
+            rng.uniform(1.0, 5.0, (n_p, 1)),
+            (np.eye(3)[None] + 0.1 * rng.standard_normal((n_p, 3, 3))).reshape(n_p, 9),
+            axis / np.linalg.norm(axis, axis=1, keepdims=True),
+        )
+    )
+    out, moved = slosh_momentum(twist, t_s, inputs, rod)
+    for p in range(n_p):
+        alone = slosh_momentum(twist[p : p + 1], t_s, inputs[p : p + 1], rod)
+        assert np.array_equal(out[p], alone[0][0]) and np.array_equal(moved[p], alone[1][0])
+    if rod:
+        inputs[3, 7:16] = 0.0  # no coupling: n.C n = 0
+        with pytest.raises(ZeroDivisionError):
+            slosh_momentum(twist, t_s, inputs, rod)

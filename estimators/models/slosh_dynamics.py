@@ -42,58 +42,67 @@ def cross3(ax: float, ay: float, az: float, bx: float, by: float, bz: float) -> 
 
 
 @njit(cache=True, inline="always")
-def frame_terms(spin: FloatArray, row: int, point: FloatArray) -> tuple[float, float, float]:
-    """The acceleration terms of a displacement ``x`` moving at ``x'`` (``point`` = ``[x; x']``, base axes) in the
-    rotating base frame, ``2 omega x x' + domega/dt x x + omega x (omega x x)``, for ``spin[row, 3:9]`` = ``[omega;
-    domega/dt]`` (base axes): Coriolis, Euler and centripetal."""
-    wx, wy, wz = spin[row, 3], spin[row, 4], spin[row, 5]
-    c1 = cross3(wx, wy, wz, point[3], point[4], point[5])
-    c2 = cross3(spin[row, 6], spin[row, 7], spin[row, 8], point[0], point[1], point[2])
-    w_x = cross3(wx, wy, wz, point[0], point[1], point[2])
+def frame_terms(
+    spin: tuple[float, float, float, float, float, float], x: tuple[float, float, float], v: tuple[float, float, float]
+) -> tuple[float, float, float]:
+    """The acceleration terms of a displacement ``x`` moving at ``v`` = ``x'`` (base axes) in the rotating base frame,
+    ``2 omega x x' + domega/dt x x + omega x (omega x x)``, for ``spin`` = ``[omega; domega/dt]`` (base axes):
+    Coriolis, Euler and centripetal."""
+    wx, wy, wz = spin[0], spin[1], spin[2]
+    c1 = cross3(wx, wy, wz, v[0], v[1], v[2])
+    c2 = cross3(spin[3], spin[4], spin[5], x[0], x[1], x[2])
+    w_x = cross3(wx, wy, wz, x[0], x[1], x[2])
     c3 = cross3(wx, wy, wz, w_x[0], w_x[1], w_x[2])
     return 2.0 * c1[0] + c2[0] + c3[0], 2.0 * c1[1] + c2[1] + c3[1], 2.0 * c1[2] + c2[2] + c3[2]
 
 
+#: the rows of the lanes' scratch of :func:`integrate_slosh` (one column per lane: everything a lane's RK4 reads or
+#: writes in one array, which lets the compiler prove the lanes' loads and stores independent and vectorise them):
+#: the state ``[x; x']`` (6), the RK4 stage's point (6), its four slopes (4 x 6), the forcing at the step's start,
+#: middle and end (3 x 9), the coupling ``C`` (9, row-major), the rod's axis (3), ``[w^2, 2 zeta w, kappa]`` (3) and
+#: the count of zero divisors of the rod's tension met (1)
+STATE, STAGE, SLOPES, STEP, COUPLING, AXIS, OSCILLATOR, ZERO_DIVISORS, N_LANE_ROWS = 0, 6, 12, 36, 63, 72, 75, 78, 79
+
+
 @njit(cache=True, inline="always")
-def slosh_slope(
-    point: FloatArray,
-    forcing: FloatArray,
-    row: int,
-    coupling: FloatArray,
-    stiff: float,
-    damp: float,
-    axis: FloatArray,
-    kappa: float,
-    rod: bool,
-    out: FloatArray,
-    s: int,
-) -> None:
-    """``out[s]`` (6,) = ``[x'; x'']`` at ``point`` = ``[x; x']`` (module docstring), with ``forcing[row]`` = ``[a_tank;
-    omega; domega/dt]`` (9,; the tank's acceleration and the base's rates), the coupling ``C`` (3, 3), ``stiff = w^2``,
-    ``damp = 2 zeta w``, and with ``rod`` the pendulum's axis ``a`` (3,) and curvature ``kappa``. Real or complex, all
-    alike; indices rather than views, which cost in the integration's innermost loop."""
-    x0, x1, x2, v0, v1, v2 = point[0], point[1], point[2], point[3], point[4], point[5]
+def slosh_slope(lanes: FloatArray, point: int, row: int, rod: bool, s: int, lane: int) -> None:
+    """The slope ``[x'; x'']`` (module docstring) of one lane of the scratch ``lanes`` (:data:`N_LANE_ROWS`, L) at
+    the point in its rows ``point`` to ``point + 6`` (``[x; x']``), for the forcing at the step's ``row`` (``[a_tank;
+    omega; domega/dt]``, the tank's acceleration and the base's rates), written to the rows of slope ``s``; with
+    ``rod`` the pendulum's (a zero divisor of its tension counted). Real or complex, all alike; indices rather than
+    views, which cost in the integration's innermost loop."""
+    w = lanes
+    x0, x1, x2 = w[point, lane], w[point + 1, lane], w[point + 2, lane]
+    v0, v1, v2 = w[point + 3, lane], w[point + 4, lane], w[point + 5, lane]
+    stiff, damp, kappa = w[OSCILLATOR, lane], w[OSCILLATOR + 1, lane], w[OSCILLATOR + 2, lane]
+    a_0, a_1, a_2 = w[AXIS, lane], w[AXIS + 1, lane], w[AXIS + 2, lane]
     if rod:
-        ax = axis[0] * x0 + axis[1] * x1 + axis[2] * x2
-        f0 = -stiff * (x0 + ax * axis[0] + kappa * ax * x0) - damp * v0
-        f1 = -stiff * (x1 + ax * axis[1] + kappa * ax * x1) - damp * v1
-        f2 = -stiff * (x2 + ax * axis[2] + kappa * ax * x2) - damp * v2
+        ax = a_0 * x0 + a_1 * x1 + a_2 * x2
+        f0 = -stiff * (x0 + ax * a_0 + kappa * ax * x0) - damp * v0
+        f1 = -stiff * (x1 + ax * a_1 + kappa * ax * x1) - damp * v1
+        f2 = -stiff * (x2 + ax * a_2 + kappa * ax * x2) - damp * v2
     else:
         f0, f1, f2 = -stiff * x0 - damp * v0, -stiff * x1 - damp * v1, -stiff * x2 - damp * v2
-    g = frame_terms(forcing, row, point)
-    b0, b1, b2 = forcing[row, 0] + g[0], forcing[row, 1] + g[1], forcing[row, 2] + g[2]
-    cf0 = coupling[0, 0] * f0 + coupling[0, 1] * f1 + coupling[0, 2] * f2
-    cf1 = coupling[1, 0] * f0 + coupling[1, 1] * f1 + coupling[1, 2] * f2
-    cf2 = coupling[2, 0] * f0 + coupling[2, 1] * f1 + coupling[2, 2] * f2
+    r = STEP + 9 * row
+    spin = (w[r + 3, lane], w[r + 4, lane], w[r + 5, lane], w[r + 6, lane], w[r + 7, lane], w[r + 8, lane])
+    g = frame_terms(spin, (x0, x1, x2), (v0, v1, v2))
+    b0, b1, b2 = w[r, lane] + g[0], w[r + 1, lane] + g[1], w[r + 2, lane] + g[2]
+    c = COUPLING
+    cf0 = w[c, lane] * f0 + w[c + 1, lane] * f1 + w[c + 2, lane] * f2
+    cf1 = w[c + 3, lane] * f0 + w[c + 4, lane] * f1 + w[c + 5, lane] * f2
+    cf2 = w[c + 6, lane] * f0 + w[c + 7, lane] * f1 + w[c + 8, lane] * f2
     a0, a1, a2 = cf0 - b0, cf1 - b1, cf2 - b2
     if rod:
-        n0, n1, n2 = axis[0] + kappa * x0, axis[1] + kappa * x1, axis[2] + kappa * x2
-        cn0 = coupling[0, 0] * n0 + coupling[0, 1] * n1 + coupling[0, 2] * n2
-        cn1 = coupling[1, 0] * n0 + coupling[1, 1] * n1 + coupling[1, 2] * n2
-        cn2 = coupling[2, 0] * n0 + coupling[2, 1] * n1 + coupling[2, 2] * n2
-        tension = (n0 * a0 + n1 * a1 + n2 * a2 + kappa * (v0 * v0 + v1 * v1 + v2 * v2)) / (n0 * cn0 + n1 * cn1 + n2 * cn2)
+        n0, n1, n2 = a_0 + kappa * x0, a_1 + kappa * x1, a_2 + kappa * x2
+        cn0 = w[c, lane] * n0 + w[c + 1, lane] * n1 + w[c + 2, lane] * n2
+        cn1 = w[c + 3, lane] * n0 + w[c + 4, lane] * n1 + w[c + 5, lane] * n2
+        cn2 = w[c + 6, lane] * n0 + w[c + 7, lane] * n1 + w[c + 8, lane] * n2
+        den = n0 * cn0 + n1 * cn1 + n2 * cn2
+        w[ZERO_DIVISORS, lane] += 1.0 if den == 0.0 else 0.0
+        tension = (n0 * a0 + n1 * a1 + n2 * a2 + kappa * (v0 * v0 + v1 * v1 + v2 * v2)) / den
         a0, a1, a2 = a0 - tension * cn0, a1 - tension * cn1, a2 - tension * cn2
-    out[s, 0], out[s, 1], out[s, 2], out[s, 3], out[s, 4], out[s, 5] = v0, v1, v2, a0, a1, a2
+    o = SLOPES + 6 * s
+    w[o, lane], w[o + 1, lane], w[o + 2, lane], w[o + 3, lane], w[o + 4, lane], w[o + 5, lane] = v0, v1, v2, a0, a1, a2
 
 
 @njit(cache=True, inline="always")
@@ -148,50 +157,116 @@ def slosh_outputs(states: FloatArray, tank: FloatArray, mass: float, out: FloatA
 N_INPUTS = 19
 
 
+#: the parameter sets integrated side by side by :func:`slosh_momentum` (a lane each): one set's RK4 is scalar
+#: arithmetic; the same operations on several sets at once compile to vector instructions (a grid of 64 sets 2.4x
+#: faster than one by one, the same numbers to the last bit)
+LANES = 8
+
+
 @njit(cache=True)
-def integrate_slosh(
-    twist: FloatArray, t_s: FloatArray, inputs: FloatArray, rod: bool, out: FloatArray, moved: FloatArray, work: FloatArray
-) -> None:
-    """One parameter set, real or complex alike: :func:`slosh_outputs` ``out`` (T, 6) and ``moved`` (T, 10) of the
-    mass driven by the rest's twists ``twist`` (T, 6) ``[v; omega]`` (base origin, base axes) at times ``t_s``, for
-    ``inputs`` (:data:`N_INPUTS`,), with a rod or not. ``work`` (2 T + 9, 9), of the same type, is scratch."""
-    tank, coupling, axis = inputs[0:3], inputs[7:16].reshape(3, 3), inputs[16:19]
-    mass, omega_n, zeta, kappa = inputs[3], inputs[4], inputs[5], inputs[6]
-    n_t = twist.shape[0]
-    forcing, states = work[:n_t], work[n_t : 2 * n_t, :6]  # per sample [a_tank; omega; domega/dt] and [x; x']
-    state, stage, slopes = work[2 * n_t, :6], work[2 * n_t + 1, :6], work[2 * n_t + 2 : 2 * n_t + 6, :6]
-    step = work[2 * n_t + 6 : 2 * n_t + 9]  # the forcing at a step's start, middle and end
-    for k in range(n_t):
-        tank_forcing(twist, t_s, tank, k, forcing)
-    stiff, damp = omega_n * omega_n, 2.0 * zeta * omega_n
+def _lane_forcing(twist: FloatArray, t_s: FloatArray, tank: FloatArray, forcing: FloatArray, lane: int) -> None:
+    """``forcing[:, :, lane]`` (T, 9) = :func:`tank_forcing` of every sample of ``twist`` (T, 6). Compiled apart from
+    :func:`integrate_slosh`, with Python's error model: a zero time step raises ``ZeroDivisionError``."""
+    one = np.empty((twist.shape[0], 9), dtype=forcing.dtype)
+    for k in range(twist.shape[0]):
+        tank_forcing(twist, t_s, tank, k, one)
+    forcing[:, :, lane] = one
+
+
+@njit(cache=True, inline="always")
+def _slopes_at(lanes: FloatArray, point: int, row: int, rod: bool, s: int) -> None:
+    """:func:`slosh_slope` of every lane."""
+    for lane in range(lanes.shape[1]):
+        slosh_slope(lanes, point, row, rod, s, lane)
+
+
+@njit(cache=True, inline="always")
+def _stage(lanes: FloatArray, s: int, step: float) -> None:
+    """Every lane's RK4 stage point: the state plus ``step`` times slope ``s - 1``."""
     for i in range(6):
-        state[i] = 0.0 * stiff
-        states[0, i] = state[i]
+        for lane in range(lanes.shape[1]):
+            lanes[STAGE + i, lane] = lanes[STATE + i, lane] + step * lanes[SLOPES + 6 * (s - 1) + i, lane]
+
+
+# numpy's error model (a division by zero gives inf, not an exception) lets the lanes' divisions compile to vector
+# instructions; the one division here, the rod's tension over n.C n, counts its zero divisors instead. Inlined where
+# called, so that the compiler knows the scratch's number of lanes (its shape, set there), and vectorises for it
+@njit(cache=True, error_model="numpy", inline="always")
+def integrate_slosh(
+    twist: FloatArray, t_s: FloatArray, inputs: FloatArray, rod: bool, out: FloatArray, moved: FloatArray, w: FloatArray
+) -> None:
+    """L parameter sets side by side, real or complex alike: :func:`slosh_outputs` ``out`` (L, T, 6) and ``moved``
+    (L, T, 10) of the mass driven by the rest's twists ``twist`` (L, T, 6) ``[v; omega]`` (base origin, base axes) at
+    times ``t_s``, for ``inputs`` (L, :data:`N_INPUTS`), with a rod or not; ``w`` (:data:`N_LANE_ROWS`, W), zeros, of
+    the same type, is the lanes' scratch (W >= L lanes; those past L repeat the last set). Each set's numbers are
+    those of its integration alone (every operation per lane, in the same order).
+
+    Raises:
+        ZeroDivisionError: the rod's tension has a zero divisor ``n.C n`` (as a division by zero would)."""
+    n_l, n_t = twist.shape[0], twist.shape[1]
+    dtype = twist.dtype
+    width = w.shape[1]
+    forcing = np.empty((n_t, 9, width), dtype=dtype)
+    for column in range(width):
+        lane = min(column, n_l - 1)
+        if column < n_l:
+            _lane_forcing(twist[lane], t_s, inputs[lane, 0:3], forcing, column)
+        else:
+            forcing[:, :, column] = forcing[:, :, lane]
+        for i in range(9):
+            w[COUPLING + i, column] = inputs[lane, 7 + i]
+        for i in range(3):
+            w[AXIS + i, column] = inputs[lane, 16 + i]
+        omega_n, zeta = inputs[lane, 4], inputs[lane, 5]
+        w[OSCILLATOR, column], w[OSCILLATOR + 1, column], w[OSCILLATOR + 2, column] = (
+            omega_n * omega_n,
+            2.0 * zeta * omega_n,
+            inputs[lane, 6],
+        )
+    states = np.empty((n_t, 6, width), dtype=dtype)  # per sample [x; x'] of each lane
+    for i in range(6):
+        for lane in range(width):
+            w[STATE + i, lane] = 0.0 * w[OSCILLATOR, lane]
+            states[0, i, lane] = w[STATE + i, lane]
     for k in range(1, n_t):
         h = t_s[k] - t_s[k - 1]
         for i in range(9):
-            step[0, i], step[2, i] = forcing[k - 1, i], forcing[k, i]
-            step[1, i] = 0.5 * (step[0, i] + step[2, i])
-        slosh_slope(state, step, 0, coupling, stiff, damp, axis, kappa, rod, slopes, 0)
-        for s in range(1, 4):  # RK4: the step's middle twice, its end
-            fraction = 1.0 if s == 3 else 0.5
-            for i in range(6):
-                stage[i] = state[i] + fraction * h * slopes[s - 1, i]
-            slosh_slope(stage, step, 1 if s < 3 else 2, coupling, stiff, damp, axis, kappa, rod, slopes, s)
+            for lane in range(width):
+                w[STEP + i, lane], w[STEP + 18 + i, lane] = forcing[k - 1, i, lane], forcing[k, i, lane]
+                w[STEP + 9 + i, lane] = 0.5 * (w[STEP + i, lane] + w[STEP + 18 + i, lane])
+        _slopes_at(w, STATE, 0, rod, 0)  # RK4: the step's start, its middle twice, its end
+        _stage(w, 1, 0.5 * h)
+        _slopes_at(w, STAGE, 1, rod, 1)
+        _stage(w, 2, 0.5 * h)
+        _slopes_at(w, STAGE, 1, rod, 2)
+        _stage(w, 3, 1.0 * h)
+        _slopes_at(w, STAGE, 2, rod, 3)
         for i in range(6):
-            state[i] = state[i] + (h / 6.0) * (slopes[0, i] + 2.0 * slopes[1, i] + 2.0 * slopes[2, i] + slopes[3, i])
-            states[k, i] = state[i]
-    slosh_outputs(states, tank, mass, out, moved)
+            for lane in range(width):
+                slopes = (w[SLOPES + i, lane], w[SLOPES + 6 + i, lane], w[SLOPES + 12 + i, lane], w[SLOPES + 18 + i, lane])
+                w[STATE + i, lane] = w[STATE + i, lane] + (h / 6.0) * (slopes[0] + 2.0 * slopes[1] + 2.0 * slopes[2] + slopes[3])
+                states[k, i, lane] = w[STATE + i, lane]
+    for lane in range(n_l):
+        if w[ZERO_DIVISORS, lane] != 0.0:
+            raise ZeroDivisionError("slosh: the rod's tension divides by n.C n = 0")
+        slosh_outputs(np.ascontiguousarray(states[:, :, lane]), inputs[lane, 0:3], inputs[lane, 3], out[lane], moved[lane])
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")  # the model of the integration inlined here
 def slosh_momentum(twist: FloatArray, t_s: FloatArray, inputs: FloatArray, rod: bool) -> tuple[FloatArray, FloatArray]:
     """For P parameter sets: the slosh mass's relative momentum (P, T, 6) and the displaced parameters (P, T, 10)
-    (:func:`integrate_slosh`), from the rest's twists (P, T, 6) and the inputs (P, :data:`N_INPUTS`)."""
+    (:func:`integrate_slosh`, :data:`LANES` sets at a time), from the rest's twists (P, T, 6) and the inputs
+    (P, :data:`N_INPUTS`)."""
     n_p, n_t = twist.shape[0], twist.shape[1]
     out = np.zeros((n_p, n_t, 6))
     moved = np.zeros((n_p, n_t, 10))
-    work = np.empty((2 * n_t + 9, 9))
-    for p in range(n_p):
-        integrate_slosh(twist[p], t_s, inputs[p], rod, out[p], moved[p], work)
+    for first in range(0, n_p, LANES):
+        last = min(first + LANES, n_p)
+        if last - first == 1:  # one set: one lane
+            integrate_slosh(
+                twist[first:last], t_s, inputs[first:last], rod, out[first:last], moved[first:last], np.zeros((N_LANE_ROWS, 1))
+            )
+        else:
+            lanes = np.zeros((N_LANE_ROWS, LANES))
+            integrate_slosh(twist[first:last], t_s, inputs[first:last], rod, out[first:last], moved[first:last], lanes)
     return out, moved

@@ -122,6 +122,12 @@ def twist_tangents(
 COMPLEX_STEP = 1e-30
 
 
+#: the rows of :func:`_slope_tangent`'s scratch (8, 3), indexed rather than taken as views (a view per stage cost its
+#: reference counts, 5 % of the kernel): the spring and damper's force ``f``, ``C f - b``, the rod's direction ``n``,
+#: ``C n``, and the derivatives of each along a direction
+_F, _ACC, _N, _CN, _DF, _DACC, _DN, _DCN = 0, 1, 2, 3, 4, 5, 6, 7
+
+
 @njit(cache=True, inline="always")
 def _slope_tangent(
     point: FloatArray,
@@ -145,30 +151,37 @@ def _slope_tangent(
     ``step[row]`` (9,) and the inputs (N_INPUTS,; their ``coupling`` (3, 3) and ``axis`` (3,) given), and
     ``d_slopes[:, s]`` its derivatives along K directions from those of ``point`` (K, 6), ``step`` (K, 3, 9), the
     inputs (K, N_INPUTS) and the coupling (K, 3, 3): the slope's forward-mode derivative written out (the spring, the
-    frame's terms, the rod's restoring force and tension). ``work`` (8, 3) is scratch; indices, not views, in here.
+    frame's terms, the rod's restoring force and tension). ``work`` (8, 3) is scratch (rows :data:`_F` to :data:`_DCN`).
     ``moves[q]`` (K,) is false for a direction along which the forcing and the coupling do not change (the
     oscillator's own frequency, damping and rod): their terms are skipped."""
     omega_n, zeta, kappa = inputs[4], inputs[5], inputs[6]
     stiff, damp = omega_n * omega_n, 2.0 * zeta * omega_n
-    f, acc, n, cn, df, dacc, dn, dcn = work[0], work[1], work[2], work[3], work[4], work[5], work[6], work[7]
     wx, wy, wz = step[row, 3], step[row, 4], step[row, 5]
     w_x = _cross(wx, wy, wz, point[0], point[1], point[2])
     ax = axis[0] * point[0] + axis[1] * point[1] + axis[2] * point[2]
     for c in range(3):
         spring = point[c] + ax * axis[c] + kappa * ax * point[c] if rod else point[c]
-        f[c] = -stiff * spring - damp * point[3 + c]
-    g = frame_terms(step, row, point)
+        work[_F, c] = -stiff * spring - damp * point[3 + c]
+    g = frame_terms(
+        (wx, wy, wz, step[row, 6], step[row, 7], step[row, 8]), (point[0], point[1], point[2]), (point[3], point[4], point[5])
+    )
     for c in range(3):  # C f - b, before the rod's tension
-        acc[c] = coupling[c, 0] * f[0] + coupling[c, 1] * f[1] + coupling[c, 2] * f[2] - (step[row, c] + g[c])
-        n[c] = axis[c] + kappa * point[c]
+        work[_ACC, c] = (
+            coupling[c, 0] * work[_F, 0] + coupling[c, 1] * work[_F, 1] + coupling[c, 2] * work[_F, 2] - (step[row, c] + g[c])
+        )
+        work[_N, c] = axis[c] + kappa * point[c]
     for c in range(3):
-        cn[c] = coupling[c, 0] * n[0] + coupling[c, 1] * n[1] + coupling[c, 2] * n[2]
-    den = n[0] * cn[0] + n[1] * cn[1] + n[2] * cn[2]
+        work[_CN, c] = coupling[c, 0] * work[_N, 0] + coupling[c, 1] * work[_N, 1] + coupling[c, 2] * work[_N, 2]
+    den = work[_N, 0] * work[_CN, 0] + work[_N, 1] * work[_CN, 1] + work[_N, 2] * work[_CN, 2]
     vv = point[3] * point[3] + point[4] * point[4] + point[5] * point[5]
-    tension = (n[0] * acc[0] + n[1] * acc[1] + n[2] * acc[2] + kappa * vv) / den if rod else 0.0
+    tension = (
+        (work[_N, 0] * work[_ACC, 0] + work[_N, 1] * work[_ACC, 1] + work[_N, 2] * work[_ACC, 2] + kappa * vv) / den
+        if rod
+        else 0.0
+    )
     for c in range(3):  # the slope itself, as slosh_slope has it (the test holds the two to the same values)
         slopes[s, c] = point[3 + c]
-        slopes[s, 3 + c] = acc[c] - tension * cn[c]
+        slopes[s, 3 + c] = work[_ACC, c] - tension * work[_CN, c]
     for q in range(d_point.shape[0]):
         dx0, dx1, dx2 = d_point[q, 0], d_point[q, 1], d_point[q, 2]
         dv0, dv1, dv2 = d_point[q, 3], d_point[q, 4], d_point[q, 5]
@@ -184,7 +197,7 @@ def _slope_tangent(
                 d_spring = dxc + d_ax * axis[c] + ax * d_axis_c + (d_kappa * ax + kappa * d_ax) * point[c] + kappa * ax * dxc
             else:
                 spring, d_spring = point[c], dxc
-            df[c] = -d_stiff * spring - stiff * d_spring - d_damp * point[3 + c] - damp * d_point[q, 3 + c]
+            work[_DF, c] = -d_stiff * spring - stiff * d_spring - d_damp * point[3 + c] - damp * d_point[q, 3 + c]
         # d g = 2 (dw x x' + w x dx') + d(dw/dt) x x + dw/dt x dx + dw x (w x x) + w x (dw x x + w x dx)
         e2 = _cross(wx, wy, wz, dv0, dv1, dv2)
         e4 = _cross(step[row, 6], step[row, 7], step[row, 8], dx0, dx1, dx2)
@@ -192,7 +205,7 @@ def _slope_tangent(
         e6 = _cross(wx, wy, wz, inner[0], inner[1], inner[2])
         for c in range(3):
             dg = 2.0 * e2[c] + e4[c] + e6[c]
-            dacc[c] = coupling[c, 0] * df[0] + coupling[c, 1] * df[1] + coupling[c, 2] * df[2] - dg
+            work[_DACC, c] = coupling[c, 0] * work[_DF, 0] + coupling[c, 1] * work[_DF, 1] + coupling[c, 2] * work[_DF, 2] - dg
             d_slopes[q, s, c] = d_point[q, 3 + c]
         if moves[q]:  # the forcing's and the coupling's own changes
             dwx, dwy, dwz = d_step[q, row, 3], d_step[q, row, 4], d_step[q, row, 5]
@@ -202,27 +215,29 @@ def _slope_tangent(
             inner = _cross(dwx, dwy, dwz, point[0], point[1], point[2])
             e7 = _cross(wx, wy, wz, inner[0], inner[1], inner[2])
             for c in range(3):
-                dacc[c] += (
-                    d_coupling[q, c, 0] * f[0] + d_coupling[q, c, 1] * f[1] + d_coupling[q, c, 2] * f[2]
+                work[_DACC, c] += (
+                    d_coupling[q, c, 0] * work[_F, 0] + d_coupling[q, c, 1] * work[_F, 1] + d_coupling[q, c, 2] * work[_F, 2]
                     - (d_step[q, row, c] + 2.0 * e1[c] + e3[c] + e5[c] + e7[c])
                 )  # fmt: skip
         for c in range(3):
-            d_slopes[q, s, 3 + c] = dacc[c]
+            d_slopes[q, s, 3 + c] = work[_DACC, c]
         if rod:
             for c in range(3):
-                dn[c] = d_inputs[q, 16 + c] + d_kappa * point[c] + kappa * d_point[q, c]
+                work[_DN, c] = d_inputs[q, 16 + c] + d_kappa * point[c] + kappa * d_point[q, c]
             d_num = d_kappa * vv + 2.0 * kappa * (point[3] * dv0 + point[4] * dv1 + point[5] * dv2)
             d_den = 0.0
             for c in range(3):
-                dcn[c] = coupling[c, 0] * dn[0] + coupling[c, 1] * dn[1] + coupling[c, 2] * dn[2]
+                work[_DCN, c] = coupling[c, 0] * work[_DN, 0] + coupling[c, 1] * work[_DN, 1] + coupling[c, 2] * work[_DN, 2]
                 if moves[q]:
-                    dcn[c] += d_coupling[q, c, 0] * n[0] + d_coupling[q, c, 1] * n[1] + d_coupling[q, c, 2] * n[2]
-                d_num += dn[c] * acc[c] + n[c] * dacc[c]
+                    work[_DCN, c] += (
+                        d_coupling[q, c, 0] * work[_N, 0] + d_coupling[q, c, 1] * work[_N, 1] + d_coupling[q, c, 2] * work[_N, 2]
+                    )
+                d_num += work[_DN, c] * work[_ACC, c] + work[_N, c] * work[_DACC, c]
             for c in range(3):
-                d_den += dn[c] * cn[c] + n[c] * dcn[c]
+                d_den += work[_DN, c] * work[_CN, c] + work[_N, c] * work[_DCN, c]
             d_tension = (d_num - tension * d_den) / den
             for c in range(3):
-                d_slopes[q, s, 3 + c] -= d_tension * cn[c] + tension * dcn[c]
+                d_slopes[q, s, 3 + c] -= d_tension * work[_CN, c] + tension * work[_DCN, c]
 
 
 @njit(cache=True)
