@@ -194,13 +194,21 @@ def _dask_client(spec: ExecutorSpec) -> Iterator[Any]:
         finally:
             client.close()
         return
-    cluster = LocalCluster(n_workers=spec.workers, threads_per_worker=1, processes=True, dashboard_address=None)
-    client = Client(cluster)
+    # the cluster's nannies set their workers' environment in this process's (OMP_NUM_THREADS=1,
+    # OPENBLAS_NUM_THREADS=1, ...) and leave it there: every process started afterwards, by the caller too, would get
+    # one BLAS thread, and its arithmetic would differ from this process's in the last bits. Put back as it was
+    environment = dict(os.environ)
     try:
-        yield client
+        cluster = LocalCluster(n_workers=spec.workers, threads_per_worker=1, processes=True, dashboard_address=None)
+        client = Client(cluster)
+        try:
+            yield client
+        finally:
+            client.close()
+            cluster.close()
     finally:
-        client.close()
-        cluster.close()
+        os.environ.clear()
+        os.environ.update(environment)
 
 
 def _run_dask(function: Callable[[Any], Any], items: list[Any], spec: ExecutorSpec, bar: tqdm) -> Iterator[Any]:

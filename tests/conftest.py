@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -18,6 +19,18 @@ from spaceid_gym.robots import Robot, load_robot
 
 #: the shared data folder next to the repository (UR5 logs, design notes)
 SHARED = Path(__file__).resolve().parents[2] / "shared"
+
+
+@pytest.fixture(autouse=True)
+def _environment_left_as_found() -> object:
+    """Fails a test that leaves ``os.environ`` changed: a variable left behind (a Dask cluster's OPENBLAS_NUM_THREADS=1
+    was) changes how every later test's fresh processes compute, so results came to depend on the tests' order.
+    ``PYTEST_CURRENT_TEST`` is pytest's own, set for each phase of a test."""
+    before = dict(os.environ)
+    yield
+    after = dict(os.environ)
+    changed = sorted(k for k in before.keys() | after.keys() if before.get(k) != after.get(k) and k != "PYTEST_CURRENT_TEST")
+    assert not changed, f"the test left environment variables changed: {changed}"
 
 
 @pytest.fixture(scope="session")

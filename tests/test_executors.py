@@ -4,6 +4,7 @@ seeds; clear errors; a cancelled run leaves no output."""
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 from typing import Any
@@ -68,7 +69,11 @@ def test_a_tiny_evaluation_is_bit_identical_in_process_in_two_processes_and_on_a
     assert [(r["setting"], r["estimator"]) for r in serial] == [(i, s) for i in range(3) for s in specs]
     assert {r["estimator_seed"] for r in serial} == set(job_seeds(11, 3))
     assert run(ExecutorSpec("processes", 2)) == serial
+    environment = dict(os.environ)
     assert run(ExecutorSpec("dask", 2)) == serial
+    # the cluster's nannies left OMP_NUM_THREADS=1, OPENBLAS_NUM_THREADS=1, ... in this process's environment, so a
+    # process started afterwards computed with one BLAS thread (a later test's fresh process differed in the last bits)
+    assert dict(os.environ) == environment
     # the random draws and BLAS products of jobs, whatever the executor and the number of workers
     draws = run_jobs(_draw, job_seeds(3, 4), ExecutorSpec("serial"), progress=False)
     assert run_jobs(_draw, job_seeds(3, 4), ExecutorSpec("processes", 2), progress=False) == draws
