@@ -40,8 +40,9 @@ demo: $(STAMP)
 	$(BIN)/spaceid demo --out demo-output
 
 # pytest's exit code 5 ("no tests collected") is a failure here
+# on every core (pytest-xdist), a test file per worker so that each file's shared fixtures are built once
 test: $(STAMP)
-	@$(BIN)/python -m pytest; rc=$$?; \
+	@$(BIN)/python -m pytest -n auto --dist loadfile; rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "make test: pytest collected no tests"; exit 1; fi; exit $$rc
 
 # lint-imports: the import contract of pyproject.toml (layers top -> identification -> core, no cycles; see
