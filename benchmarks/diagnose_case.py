@@ -10,6 +10,7 @@ the log's own rate and at 50 and 100 Hz (the same draw, the rate changed).
 
     python benchmarks/diagnose_case.py none 9737
     python benchmarks/diagnose_case.py delay 9759 --delay-at-truth
+    python benchmarks/diagnose_case.py none 9821 --rate 50
 """
 
 from __future__ import annotations
@@ -60,8 +61,9 @@ def main() -> None:
     parser.add_argument("seed", type=int)
     parser.add_argument("--seconds", type=float, default=60.0, help="the log's length (the matrix's: 60 s)")
     parser.add_argument("--delay-at-truth", action="store_true", help="a delay log: the delay that fits best at the truth")
+    parser.add_argument("--rate", type=int, default=None, help="the sample rate pinned (Hz; the draw's otherwise)")
     args = parser.parse_args()
-    case = draw_variation(args.effect, args.seed)
+    case = draw_variation(args.effect, args.seed, None if args.rate is None else {"rate_hz": args.rate})
     print(f"{args.effect} {args.seed}: {case.robot}, {case.rate_hz} Hz, {case.attitude}, noise x{case.noise_scale:.2f}")
     env = simulate_variation(case, args.seconds)
     model, log, truth = IdentificationModel(env.robot, "fuel"), env.measurement_log(), truth_of(env)
