@@ -71,9 +71,9 @@ def rereferenced(
     The channel is kept when moving its reference changes the baseline's whitened residual by less than
     :data:`REREFERENCE_CHI2` (:meth:`~estimators.attitude_channel.AttitudeChannel.moved_chi2`): the baseline's fit
     of both channels could then move by at most ``sqrt(0.05)`` = 0.22 of its standard deviations, to first order
-    with the error model held. The change grows with a fit's distance from the baseline; at the candidates' fits of
-    clean and momentum logs (30 s of 9762 and 9769) it stayed below 3e-3. The gyro coupling of a fused attitude is
-    kept as it was fitted, at the gyro-alone fit."""
+    with the error model held. The change grows with a fit's distance from the baseline, so the bound does not cover
+    a candidate's fit far from it. The gyro coupling of a fused attitude is kept as it was fitted, at the gyro-alone
+    fit."""
     if weights.reference is not None and np.array_equal(baseline.theta, weights.reference):
         return channel, baseline, weights
     moved = AttitudeChannel.of(model, log, channel.coupling, baseline.theta)
