@@ -21,7 +21,8 @@ leaves 27.4, its linear absorption moving the fuel by 24 kg): the power is then 
 A slosh is tested with the model it was simulated with: a pendulum truth (``slosh_model = "pendulum"`` in
 ``hidden_effects``) with the pendulum term (:func:`candidate_spec`; six unknowns, its rod's axis and curvature at the
 truth in the nearest model without the effect), a spring-mass with the spring. ``diagnose`` fits both slosh models,
-so its Bonferroni divides ``alpha`` over one test more than its candidates (:data:`N_TESTS`).
+so its Bonferroni divides ``alpha`` over one test more than its candidates, and the candidates have half of ``alpha``
+(:data:`N_TESTS`).
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from scipy.stats import chi2, ncx2
 
-from estimators.diagnostics.diagnose import CANDIDATE_VARIANTS, DEFAULT_CANDIDATES, candidate_model
+from estimators.diagnostics.diagnose import CANDIDATE_VARIANTS, CLEAN_LOG_FAMILIES, DEFAULT_CANDIDATES, candidate_model
 from estimators.diagnostics.model_fit import independent_attitude_channel
 from estimators.diagnostics.workflow import true_parameters
 from estimators.problem import IdentificationModel, IdentificationProblem
@@ -51,9 +52,10 @@ ONLY_WITH_EFFECT: dict[str, tuple[str, ...]] = {
     )
 }
 
-#: the likelihood-ratio tests ``diagnose`` makes with its default candidates: one per candidate and one more per extra
-#: model of an effect (:data:`~estimators.diagnostics.diagnose.CANDIDATE_VARIANTS`), its Bonferroni's divisor
-N_TESTS = len(DEFAULT_CANDIDATES) + sum(len(specs) - 1 for specs in CANDIDATE_VARIANTS.values())
+#: the divisor of ``alpha`` in ``diagnose``'s significance with its default candidates: one likelihood-ratio test per
+#: candidate and one more per extra model of an effect (:data:`~estimators.diagnostics.diagnose.CANDIDATE_VARIANTS`),
+#: times the test families sharing ``alpha`` (:data:`~estimators.diagnostics.diagnose.CLEAN_LOG_FAMILIES`)
+N_TESTS = CLEAN_LOG_FAMILIES * (len(DEFAULT_CANDIDATES) + sum(len(specs) - 1 for specs in CANDIDATE_VARIANTS.values()))
 
 
 def candidate_spec(effect: str, truth: dict[str, Any]) -> str:

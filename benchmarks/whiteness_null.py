@@ -1,0 +1,52 @@
+"""How often the diagnosis's whiteness test calls white noise structured: the false alarm of the Ljung-Box test
+(:func:`~estimators.diagnostics.residuals.correlation.ljung_box`, 50 lags as ``analyse_residuals`` uses them,
+Bonferroni over the gyro's three axes) on Gaussian white noise as long as a 60 s log at 20, 50 and 100 Hz, next to
+its nominal level. A clean log whose residual is white noise is ``unexplained`` at this rate (when no candidate is
+significant): the test's chi-square approximation is anti-conservative on short logs.
+
+    python benchmarks/whiteness_null.py
+    python benchmarks/whiteness_null.py --draws 20000 --alpha 0.005
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+import numpy as np
+
+from estimators.diagnostics.residuals.correlation import ljung_box
+
+#: the samples of a 60 s log at 20, 50 and 100 Hz
+LOG_SAMPLES = (1201, 3001, 6001)
+
+#: the lags of the diagnosis's Ljung-Box test (``analyse_residuals``' default)
+LAGS = 50
+
+
+def false_alarm(n_samples: int, draws: int, alpha: float, rng: np.random.Generator, chunk: int = 2000) -> float:
+    """The share of ``draws`` white-noise logs (``n_samples`` x 3) failing Ljung-Box on some axis at ``alpha / 3``."""
+    failed = 0
+    for start in range(0, draws, chunk):
+        size = min(chunk, draws - start)
+        p = ljung_box(rng.standard_normal((n_samples, 3 * size)), LAGS)[1].reshape(size, 3)
+        failed += int(np.sum(np.any(p < alpha / 3, axis=1)))
+    return failed / draws
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--draws", type=int, default=6000, help="white-noise logs per length (default 6000)")
+    parser.add_argument("--alpha", type=float, default=0.005, help="the test's level per log (the diagnosis's: 0.005)")
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+    rng = np.random.default_rng(args.seed)
+    print(f"Ljung-Box over {LAGS} lags, Bonferroni over 3 axes, nominal false alarm per log {args.alpha:.4f}:")
+    for n_samples in LOG_SAMPLES:
+        rate = false_alarm(n_samples, args.draws, args.alpha, rng)
+        se = math.sqrt(rate * (1.0 - rate) / args.draws)
+        print(f"  {n_samples:5d} samples: {rate:.4f} +- {se:.4f} ({rate / args.alpha:.2f} x nominal)")
+
+
+if __name__ == "__main__":
+    main()
