@@ -6,11 +6,14 @@ the attitude channel's gains and any reason it was judged implausible, and the f
 Cramér-Rao std at the truth) of the gyro-alone fit, of the model as given fitted by the diagnosis and of the named
 effect's fit. With ``--delay-at-truth`` (a ``delay`` log):
 the delay that fits best with every other unknown at the truth, and the residual at the true delay over the noise, at
-the log's own rate and at 50 and 100 Hz (the same draw, the rate changed).
+the log's own rate and at 50 and 100 Hz (the same draw, the rate changed). With ``--held-noise`` (a log with attitude):
+each candidate's attitude gain again, its fit refined with the attitude error model held at the baseline's instead of
+refitted (profiled) at the candidate.
 
     python benchmarks/diagnose_case.py none 9737
     python benchmarks/diagnose_case.py delay 9759 --delay-at-truth
     python benchmarks/diagnose_case.py none 9821 --rate 50
+    python benchmarks/diagnose_case.py none 9821 --held-noise
 """
 
 from __future__ import annotations
@@ -20,9 +23,11 @@ import argparse
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from estimators.diagnostics.diagnose import candidate_model, diagnose
+from estimators.attitude_channel import AttitudeChannel
+from estimators.diagnostics.diagnose import Diagnosis, candidate_model, diagnose, fit_model
 from estimators.diagnostics.workflow import ParameterErrors, apply_effect, baseline_estimate, parameter_errors, true_parameters
 from estimators.problem import IdentificationModel
+from spaceid_gym.log import MeasurementLog
 from spaceid_gym.variations import draw_variation, simulate_variation, truth_of
 
 
@@ -48,6 +53,28 @@ def delay_at_truth(seed: int, rate_hz: int | None, duration_s: float) -> str:
     )
 
 
+def held_noise_gains(model: IdentificationModel, log: MeasurementLog, d: Diagnosis) -> list[str]:
+    """Per candidate, the attitude gain of its fit refined with the error model held at the baseline's (no profile)."""
+    weights = d.weights
+    if weights is None:
+        return ["no attitude channel"]
+    base_channel = AttitudeChannel.of(model, log, weights.coupling, weights.reference)
+    assert base_channel is not None
+    base = base_channel.chi2(d.baseline.theta, weights.attitude)
+    lines = []
+    for c in sorted(d.candidates, key=lambda f: -f.lr_statistic):
+        extended = candidate_model(model, c.spec)
+        channel = AttitudeChannel.of(extended, log, weights.coupling, weights.reference)
+        held = fit_model(extended, log, starts=[c.theta], effect=c.effect, weights=weights, channel=channel)[0]
+        assert channel is not None
+        profiled = (d.baseline.attitude_chi2 or 0.0) - (c.attitude_chi2 or 0.0)
+        lines.append(
+            f"  {c.effect:17s} attitude gain held {base - channel.chi2(held.theta, weights.attitude):8.1f}  "
+            f"profiled {profiled:8.1f}"
+        )
+    return lines
+
+
 def _errors_text(label: str, errors: ParameterErrors | None) -> str:
     if errors is None:
         return f"{label}: no fuel unknowns"
@@ -62,6 +89,7 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=60.0, help="the log's length (the matrix's: 60 s)")
     parser.add_argument("--delay-at-truth", action="store_true", help="a delay log: the delay that fits best at the truth")
     parser.add_argument("--rate", type=int, default=None, help="the sample rate pinned (Hz; the draw's otherwise)")
+    parser.add_argument("--held-noise", action="store_true", help="attitude gains with the baseline's error model held")
     args = parser.parse_args()
     case = draw_variation(args.effect, args.seed, None if args.rate is None else {"rate_hz": args.rate})
     print(f"{args.effect} {args.seed}: {case.robot}, {case.rate_hz} Hz, {case.attitude}, noise x{case.noise_scale:.2f}")
@@ -81,6 +109,8 @@ def main() -> None:
     if d.best is not None and d.best.effect is not None:
         extended, estimate = apply_effect(model, log, d.best.effect, d)
         print(_errors_text(f"with {d.best.effect}", parameter_errors(extended, log, estimate, truth)))
+    if args.held_noise:
+        print("\n".join(held_noise_gains(model, log, d)))
     if args.delay_at_truth:
         for rate in (None, 50, 100):
             print(delay_at_truth(args.seed, rate, args.seconds))
