@@ -72,7 +72,7 @@ def main() -> None:
     print(
         f"{args.effect} (magnitude {'default' if size is None else f'{size:g}'}): mean expected power of the test {np.mean(powers):.2f} over {len(powers)} logs; median lambda "
         f"{np.median(lambdas):.1f} against the threshold {threshold:.1f} "
-        f"({dof} dof, alpha {ALPHA} / {power.N_TESTS} tests); 90 % power needs lambda {needed:.1f}"
+        f"({dof} dof, level alpha {ALPHA} / {power.N_TESTS}: half of alpha over the candidates' tests); 90 % power needs lambda {needed:.1f}"
     )
 
 
