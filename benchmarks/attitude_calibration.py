@@ -66,7 +66,11 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=60.0)
     parser.add_argument("--attitudes", default="star_tracker_5arcsec,exact", help="comma-separated attitude sources")
     args = parser.parse_args()
-    for attitude in args.attitudes.split(","):
+    attitudes = args.attitudes.split(",")
+    if "fused" in attitudes or "none" in attitudes:
+        # a fused attitude is compared given the gyro (its coupling, fitted by the diagnosis), which this check omits
+        parser.error(f"--attitudes: expected attitude sources independent of the gyro (star trackers, exact), got {attitudes}")
+    for attitude in attitudes:
         gains: dict[str, list[float]] = {effect: [] for effect in SLOW_EFFECTS}
         dof: dict[str, int] = {}
         for seed in range(args.first_seed, args.first_seed + args.logs):
