@@ -2,7 +2,8 @@
 logs in docs/results.md (Variation matrix).
 
 Prints the log's axes, the verdict and its reason, per candidate the likelihood ratio split into the gyro's and
-the attitude channel's gains and any reason it was judged implausible, and the fuel unknowns' errors (and z, in
+the attitude channel's gains, the tested one (the attitude error model held at the baseline's) with its p-value and
+any reason it was judged implausible, and the fuel unknowns' errors (and z, in
 Cramér-Rao std at the truth) of the gyro-alone fit, of the model as given fitted by the diagnosis and of the named
 effect's fit. With ``--delay-at-truth`` (a ``delay`` log):
 the delay that fits best with every other unknown at the truth, and the residual at the true delay over the noise, at
@@ -103,7 +104,10 @@ def main() -> None:
         gyro = (b.rss - c.rss) / sigma2
         attitude = (b.attitude_chi2 or 0.0) - (c.attitude_chi2 or 0.0)
         why = "; ".join(c.implausible)
-        print(f"  {c.effect:17s} LR {c.lr_statistic:9.1f}  gyro {gyro:9.1f}  attitude {attitude:8.1f}  {why}")
+        print(
+            f"  {c.effect:17s} LR {c.lr_statistic:9.1f}  gyro {gyro:9.1f}  attitude {attitude:8.1f}  "
+            f"held {c.held_lr_statistic:9.1f} (p {c.p_value:.2g})  {why}"
+        )
     assert d.gyro_alone_estimate is not None
     print(_errors_text("gyro-alone fit", parameter_errors(model, log, d.gyro_alone_estimate, truth)))
     print(_errors_text("model as given", parameter_errors(model, log, baseline_estimate(model, log, d), truth)))

@@ -49,6 +49,7 @@ def simulate_episode(
     sensors: SensorModel | None = None,
     control_period_s: float = 0.02,
     hidden_effects: HiddenEffects | str | None = None,
+    noise_seed: int | None = None,
 ) -> FreeFloatingIDEnv:
     """Run one identification window in :class:`FreeFloatingIDEnv` and return the env after it.
 
@@ -56,7 +57,8 @@ def simulate_episode(
     the window. All noise comes from the env's generator seeded with ``seed``. ``excitation``: a function of time
     or a :class:`FeedbackExcitation`. ``hidden_effects``:
     a :class:`~spaceid_gym.effects.HiddenEffects` or a spec string (drawn from the seed), see the
-    env; :func:`write_episode_dataset` then writes them to truth.json (``hidden_effects``).
+    env; :func:`write_episode_dataset` then writes them to truth.json (``hidden_effects``). ``noise_seed``: the
+    measurement noise from a generator of its own (the env's reset option): the same motion with new noise.
     """
     n_steps = check_log_size(duration_s, control_period_s, robot.n_joints)
     env = FreeFloatingIDEnv(
@@ -66,7 +68,10 @@ def simulate_episode(
         tank_position_m=tank_position_m,
         hidden_effects=hidden_effects,
     )
-    observation, _ = env.reset(seed=seed, options={"fuel_consumed_kg": fuel_consumed_kg})
+    options: dict[str, Any] = {"fuel_consumed_kg": fuel_consumed_kg}
+    if noise_seed is not None:
+        options["noise_seed"] = noise_seed
+    observation, _ = env.reset(seed=seed, options=options)
     if isinstance(excitation, FeedbackExcitation):
         excitation.start(env)
         for _ in range(n_steps):

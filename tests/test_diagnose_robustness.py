@@ -53,6 +53,7 @@ from estimators.diagnostics.diagnose import (
 from estimators.diagnostics.model_fit import MIN_STEP_GAIN_CHI2
 from estimators.diagnostics.power import N_TESTS
 from estimators.diagnostics.suite import DIAGNOSTIC_EXCITATION, diagnosed_cells
+from estimators.diagnostics.verdict import held_likelihood_ratio
 from estimators.diagnostics.workflow import true_parameters
 from estimators.problem import IdentificationModel
 from spaceid_gym.datasets import simulate_episode
@@ -607,3 +608,50 @@ def test_a_clean_log_pays_the_false_alarm_budget_once() -> None:
     assert not any(f.significant for f in d.candidates)
     # the candidates' half: each significant below alpha / 2 over the candidate fits, the divisor the power uses
     assert all(f.significant == (f.p_value < d.alpha / N_TESTS) for f in d.candidates)
+
+
+def _scored_fit(effect: str | None, rss: float, n_params: int, attitude: float | None, held: float | None) -> ModelFit:
+    return ModelFit(
+        effects=(),
+        effect=effect,
+        theta=np.zeros(n_params),
+        names=tuple(f"x{i}" for i in range(n_params)),
+        rss=rss,
+        n_residuals=3000,
+        n_params=n_params,
+        attitude_chi2=attitude,
+        n_attitude_values=0 if attitude is None else 3000,
+        physical={},
+        implausible=[],
+        wall_time_s=0.0,
+        attitude_chi2_held=held,
+    )
+
+
+def test_the_held_likelihood_ratio_holds_the_baselines_error_model() -> None:
+    """The likelihood ratio a candidate is tested with: the gyro's gain plus the attitude's under the baseline's error
+    model; the profile likelihood ratio without attitude, and never more than it."""
+    sigma2 = 1.0
+    baseline = _scored_fit(None, 3000.0, 4, 2990.0, 2990.0)
+    profiled_more = _scored_fit("payload", 2995.0, 14, 2950.0, 2975.0)
+    assert held_likelihood_ratio(baseline, profiled_more, sigma2) == pytest.approx(5.0 + 15.0)
+    odd = _scored_fit("payload", 2995.0, 14, 2980.0, 2970.0)  # a held chi-square below the profile's: the profile bounds
+    assert held_likelihood_ratio(baseline, odd, sigma2) == pytest.approx(5.0 + 10.0)
+    no_attitude = (_scored_fit(None, 3000.0, 4, None, None), _scored_fit("delay", 2980.0, 5, None, None))
+    assert held_likelihood_ratio(*no_attitude, sigma2) == pytest.approx(20.0)
+
+
+def test_a_candidates_refitted_error_model_names_no_effect_on_a_clean_exact_log() -> None:
+    """Clean log 9821 (``quick3``, 20 Hz, noise-free attitude, noise x1.49; held out when it was named a payload): the
+    payload's fit took the attitude error model's wander to zero and gained 30.9 in the profile likelihood ratio, all
+    of it in the attitude channel, at p below the candidates' level. Tested with the baseline's error model held,
+    the payload gains what the data hold and the verdict is ``none``."""
+    env = simulate_variation(draw_variation("none", 9821), 60.0)
+    d = diagnose(IdentificationModel(env.robot, "fuel"), env.measurement_log())
+    assert d.verdict == NO_MISSING_EFFECT, d.reason
+    payload = d.fit_of("payload")
+    assert payload is not None and d.weights is not None
+    k = payload.n_params - d.baseline.n_params
+    assert chi2.sf(payload.lr_statistic, k) < d.alpha / N_TESTS  # the profile likelihood ratio would have named it
+    assert payload.held_lr_statistic < payload.lr_statistic - 5.0
+    assert not payload.significant and payload.p_value == pytest.approx(chi2.sf(payload.held_lr_statistic, k))

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -143,6 +145,27 @@ def test_bad_constructor_options_are_named() -> None:
         env.reset(seed=0, options={"fuel": 3})
     with pytest.raises(ValueError, match="not below the full-tank base mass"):
         env.reset(seed=0, options={"fuel_consumed_kg": 500.0})
+    for bad in (-1, 1.5, "3", True):
+        with pytest.raises(ValueError, match="noise_seed"):
+            env.reset(seed=0, options={"noise_seed": bad})
+
+
+def test_a_noise_seed_measures_the_same_motion_with_new_noise() -> None:
+    """``reset(options={"noise_seed": n})``: the same starting state and motion as the seed alone, the encoders and
+    gyro with noise of their own; the same ``n`` gives the same noise."""
+    runs = []
+    for noise_seed in (None, 1, 1, 2):
+        env = FreeFloatingIDEnv(robot="quick3")
+        env.reset(seed=5, options={} if noise_seed is None else {"noise_seed": noise_seed})
+        for k in range(40):
+            env.step(np.full(env.robot.n_joints, 0.5 * math.sin(0.2 * k), dtype=np.float32))
+        log = env.measurement_log()
+        runs.append((env.simulator.state.q_rad.copy(), log.q_rad[1:].copy(), log.omega_base_body_rad_s[1:].copy()))
+    assert all(np.array_equal(runs[0][0], r[0]) for r in runs)  # the same motion
+    for measured in (1, 2):
+        assert np.array_equal(runs[1][measured], runs[2][measured])  # the same noise seed, the same noise
+        assert not np.allclose(runs[0][measured], runs[1][measured], rtol=0.0, atol=1e-12)
+        assert not np.allclose(runs[1][measured], runs[3][measured], rtol=0.0, atol=1e-12)
 
 
 def test_render_rgb_array() -> None:

@@ -16,10 +16,13 @@ For a model (robot, parameterisation, effects already in it) and a log, :func:`d
    residual, the star tracker's from the data). A candidate nested in another is refitted from the container's fit
    when that point fits better than its own (:func:`_refit_nested_from_containers`). For a candidate:
 
-   * ``lr_statistic = X_baseline - X_candidate``, chi-square with ``k_e`` degrees of freedom when the
-     effect is absent (nested models): ``p_value``; *significant* below ``alpha / (2 x number of
-     candidate fits)`` (Bonferroni: the candidates share half of ``alpha``, :data:`CLEAN_LOG_FAMILIES`; an effect
-     fitted with two models, slosh, counts twice);
+   * ``lr_statistic = X_baseline - X_candidate``, the profile likelihood ratio (the attitude error model refitted
+     at each fit); ``held_lr_statistic``, the same with the attitude error model held at the baseline's
+     (:func:`~estimators.diagnostics.verdict.held_likelihood_ratio`; equal without attitude), chi-square with
+     ``k_e`` degrees of freedom when the effect is absent (nested models): ``p_value``; *significant* below
+     ``alpha / (2 x number of candidate fits)`` (Bonferroni: the candidates share half of ``alpha``,
+     :data:`CLEAN_LOG_FAMILIES`; an effect fitted with two models, slosh, counts twice). The profile ratio is not
+     tested: a slow effect's refit can take the error model's wander to zero and gain what the data do not hold;
    * ``bic = X + k ln(n)`` (Schwarz), ``delta_bic`` relative to the baseline (negative is better);
    * *plausible*: no reason from :meth:`~estimators.models.effect_models.EffectTerm.implausible` (on a search
      bound, unphysical payload, no slosh mass);
@@ -96,7 +99,16 @@ from estimators.diagnostics.model_fit import low_frequency_p_value as low_freque
 from estimators.diagnostics.residuals import ResidualAnalysis, analyse_residuals
 from estimators.diagnostics.verdict import NO_MISSING_EFFECT as NO_MISSING_EFFECT
 from estimators.diagnostics.verdict import UNEXPLAINED as UNEXPLAINED
-from estimators.diagnostics.verdict import _challengers, _chi2, _leader, _score, _verdict, nested_p_value, rivals
+from estimators.diagnostics.verdict import (
+    _challengers,
+    _chi2,
+    _leader,
+    _score,
+    _verdict,
+    held_likelihood_ratio,
+    nested_p_value,
+    rivals,
+)
 from estimators.estimate import Estimate
 from estimators.least_squares import interior_start
 from estimators.models.effect_models import EFFECT_TERMS
@@ -287,7 +299,7 @@ def _diagnose(
         baseline, weights = profiled_baseline(model, log, baseline, weights, channel)
         channel, baseline, weights = rereferenced(model, log, baseline, weights, channel)
         # the baseline's own error model weights every candidate's fit and is the reference of the log-determinants
-        baseline.attitude_chi2 = channel.chi2(baseline.theta, weights.attitude)
+        baseline.attitude_chi2 = baseline.attitude_chi2_held = channel.chi2(baseline.theta, weights.attitude)
     # the baseline's own unknowns, profiled out of every candidate's scan
     basis = nuisance_basis(model.problem(log), baseline.theta, channel, weights)
     fits, variants_tried = [], 0
@@ -386,8 +398,7 @@ def _restarted(
 ) -> ModelFit:
     """``fit`` restarted as :func:`_restart_the_closest` says (the better of it and the restart), or ``fit`` itself
     when neither condition holds (significance at ``alpha`` over ``n_candidates``)."""
-    white2 = white_std * white_std
-    statistic = _chi2(baseline, white2) - _chi2(fit, white2)
+    statistic = held_likelihood_ratio(baseline, fit, white_std * white_std)
     added = fit.n_params - baseline.n_params
     if added < 1:
         raise RuntimeError(f"the catalogue: candidate {fit.effect} adds no unknowns to the model")

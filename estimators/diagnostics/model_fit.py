@@ -44,7 +44,10 @@ def explained_fraction(lr_statistic: float, excess: float) -> float:
 @dataclass(kw_only=True)
 class CandidateScores:
     """A candidate fit's scores against the baseline (filled in once every model is fitted; ``nan`` until then):
-    ``bic``, ``delta_bic`` (to the baseline), ``lr_statistic``, ``p_value``, ``significant``,
+    ``bic``, ``delta_bic`` (to the baseline), ``lr_statistic`` (the profile likelihood ratio: each fit's attitude
+    error model refitted at it), ``held_lr_statistic`` (the same with the attitude error model held at the
+    baseline's, the null's estimate: never more than ``lr_statistic``; equal without attitude), ``p_value`` (of
+    ``held_lr_statistic``, :func:`~estimators.diagnostics.verdict._score`), ``significant``,
     ``explained_fraction`` (of the baseline's excess over the noise, :func:`explained_fraction`) and
     ``attitude_p_value`` (of the star tracker's chi-square against its count, chi-square with that many degrees
     of freedom; ``nan`` without attitude)."""
@@ -52,6 +55,7 @@ class CandidateScores:
     bic: float = math.nan
     delta_bic: float = math.nan
     lr_statistic: float = math.nan
+    held_lr_statistic: float = math.nan
     p_value: float = math.nan
     significant: bool = False
     explained_fraction: float = math.nan
@@ -63,6 +67,7 @@ class CandidateScores:
             "bic": self.bic,
             "delta_bic": self.delta_bic,
             "lr_statistic": self.lr_statistic,
+            "held_lr_statistic": self.held_lr_statistic,
             "p_value": self.p_value,
             "significant": self.significant,
             "explained_fraction": self.explained_fraction,
@@ -112,6 +117,9 @@ class ModelFit(CandidateScores):
             (:meth:`~estimators.attitude_channel.AttitudeChannel.profile_chi2`): a chi-square over
             ``n_attitude_values`` values whose differences between fits are profile likelihood ratios (``None``
             without attitude in the log).
+        attitude_chi2_held: the attitude channel's chi-square at the fit under the weights' error model (the
+            baseline's, held): differences to the baseline's are likelihood ratios with the error model fixed at the
+            null's estimate (``None`` without attitude).
         physical: the fitted quantities (base and effects), as in the estimate file.
         implausible: reasons why the fitted effect is not physical (empty if plausible).
         wall_time_s: time of the fit.
@@ -138,6 +146,7 @@ class ModelFit(CandidateScores):
     residual_consistent: bool | None = None  # filled in by :func:`diagnose` for the significant and plausible ones
     attitude_white_p: float = math.nan  # the whitened attitude residual's low-frequency test (:func:`low_frequency_p_value`)
     attitude_noise: AttitudeNoise | None = None  # the attitude error model refitted at this fit
+    attitude_chi2_held: float | None = None  # the attitude chi-square under the weights' error model, held
 
     @property
     def residual_rms_rad_s(self) -> float:
@@ -167,6 +176,7 @@ class ModelFit(CandidateScores):
             "residual_rms_rad_s": self.residual_rms_rad_s,
             "rss": self.rss,
             "attitude_chi2": self.attitude_chi2,
+            "attitude_chi2_held": self.attitude_chi2_held,
             "chi2": self.chi2,
             "residual_consistent": self.residual_consistent,
             "attitude_white_p": self.attitude_white_p,
@@ -281,6 +291,9 @@ def fit_model(
     fit.wall_time_s = time.perf_counter() - begin
     fit.attitude_white_p = attitude_white_p
     fit.attitude_noise = noise
+    if channel is not None:
+        assert weights is not None
+        fit.attitude_chi2_held = channel.chi2(theta, weights.attitude)
     return fit, estimate
 
 

@@ -116,7 +116,10 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     the default 50 Hz); pass ``max_episode_steps`` to ``gym.make`` for another window length.
     ``reset(seed=...)`` starts a new satellite (new tank position, first fuel state); ``reset()``
     without a seed moves to the next identification window of the same satellite (more fuel
-    consumed). ``reset(options={"fuel_consumed_kg": ..., "tank_position_m": ...})`` sets either.
+    consumed). ``reset(options={"fuel_consumed_kg": ..., "tank_position_m": ...})`` sets either;
+    ``options={"noise_seed": n}`` draws the episode's measurement noise from a generator of its own seeded
+    with ``n`` (the starting state, tank and hidden effects still from ``seed``): the same motion measured with
+    new noise, for Monte Carlo over the noise alone.
 
     ## Info
     ``truth``: ``fuel_consumed_kg``, ``tank_position_m``, ``base_mass_kg``, ``base_com_m``,
@@ -223,8 +226,16 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             tank = np.asarray(options.pop("tank_position_m"), dtype=float)
         if "fuel_consumed_kg" in options:
             fuel = float(options.pop("fuel_consumed_kg"))
+        noise_rng = self.np_random
+        if "noise_seed" in options:
+            noise_seed = options.pop("noise_seed")
+            if isinstance(noise_seed, bool) or not isinstance(noise_seed, (int, np.integer)) or noise_seed < 0:
+                raise SpaceIdInputError(f"reset option 'noise_seed': expected an integer >= 0, got {noise_seed!r}")
+            noise_rng = np.random.default_rng(int(noise_seed))
         if options:
-            raise SpaceIdInputError(f"reset options: unknown keys {sorted(options)}; expected fuel_consumed_kg, tank_position_m")
+            raise SpaceIdInputError(
+                f"reset options: unknown keys {sorted(options)}; expected fuel_consumed_kg, tank_position_m, noise_seed"
+            )
         base = base_after_fuel(base_full, fuel, tank)  # validates before any state changes
         effects = self._draw_effects(fuel)
         simulator = FreeFloatingSimulator(self.robot, base, effects=effects, tank_point_m=np.asarray(base_full.com_m) + tank)
@@ -234,7 +245,7 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         self._directions = base_parameter_directions(base_params10_fuel_jacobian(base_full.com_m, theta) * self._param_scale)
         q0 = self.robot.home_configuration() + self.np_random.uniform(-0.3, 0.3, size=self.robot.n_joints)
         state = self.simulator.reset(q0_rad=np.clip(q0, self.robot.q_lower_rad, self.robot.q_upper_rad))
-        self._recorder = LogRecorder(_sensors_with_effects(self.sensors, effects), self.control_period_s, self.np_random)
+        self._recorder = LogRecorder(_sensors_with_effects(self.sensors, effects), self.control_period_s, noise_rng)
         self._gyro_delay_s = effects.delay_s or 0.0
         self._fisher, self._log_det_fisher = np.eye(4), 0.0  # prior information: one prior range per parameter
         self._fisher_update(state.composite_inertia, state.v_base_body)
