@@ -15,6 +15,7 @@ refitted (profiled) at the candidate.
     python benchmarks/diagnose_case.py delay 9759 --delay-at-truth
     python benchmarks/diagnose_case.py none 9821 --rate 50
     python benchmarks/diagnose_case.py none 9821 --held-noise
+    python benchmarks/diagnose_case.py none 10229 --attitude exact
 """
 
 from __future__ import annotations
@@ -91,9 +92,13 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=60.0, help="the log's length (the matrix's: 60 s)")
     parser.add_argument("--delay-at-truth", action="store_true", help="a delay log: the delay that fits best at the truth")
     parser.add_argument("--rate", type=int, default=None, help="the sample rate pinned (Hz; the draw's otherwise)")
+    parser.add_argument("--attitude", default=None, help="the attitude source pinned (as the suite's --fix attitude=...)")
     parser.add_argument("--held-noise", action="store_true", help="attitude gains with the baseline's error model held")
     args = parser.parse_args()
-    case = draw_variation(args.effect, args.seed, None if args.rate is None else {"rate_hz": args.rate})
+    fixed = {} if args.rate is None else {"rate_hz": args.rate}
+    if args.attitude is not None:
+        fixed["attitude"] = args.attitude
+    case = draw_variation(args.effect, args.seed, fixed or None)
     print(f"{args.effect} {args.seed}: {case.robot}, {case.rate_hz} Hz, {case.attitude}, noise x{case.noise_scale:.2f}")
     env = simulate_variation(case, args.seconds)
     model, log, truth = IdentificationModel(env.robot, "fuel"), env.measurement_log(), truth_of(env)
