@@ -54,11 +54,13 @@ def simulate_episode(
     """Run one identification window in :class:`FreeFloatingIDEnv` and return the env after it.
 
     The env's :meth:`~FreeFloatingIDEnv.measurement_log` and ``fisher_information`` then describe
-    the window. All noise comes from the env's generator seeded with ``seed``. ``excitation``: a function of time
+    the window. All noise comes from the env's generator seeded with ``seed`` (unless ``noise_seed``). ``excitation``: a function of time
     or a :class:`FeedbackExcitation`. ``hidden_effects``:
     a :class:`~spaceid_gym.effects.HiddenEffects` or a spec string (drawn from the seed), see the
     env; :func:`write_episode_dataset` then writes them to truth.json (``hidden_effects``). ``noise_seed``: the
-    measurement noise from a generator of its own (the env's reset option): the same motion with new noise.
+    measurement noise from a generator of its own (the env's reset option): the same motion with new noise for an
+    excitation that is a function of time (a :class:`FeedbackExcitation` acts on the noisy measurements, so its
+    motion changes with them).
     """
     n_steps = check_log_size(duration_s, control_period_s, robot.n_joints)
     env = FreeFloatingIDEnv(

@@ -119,7 +119,8 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     consumed). ``reset(options={"fuel_consumed_kg": ..., "tank_position_m": ...})`` sets either;
     ``options={"noise_seed": n}`` draws the episode's measurement noise from a generator of its own seeded
     with ``n`` (the starting state, tank and hidden effects still from ``seed``): the same motion measured with
-    new noise, for Monte Carlo over the noise alone.
+    new noise, for Monte Carlo over the noise alone (the env's own generator is then not advanced by the noise, so
+    a later ``reset()`` without a seed draws differently than after the same episode without ``noise_seed``).
 
     ## Info
     ``truth``: ``fuel_consumed_kg``, ``tank_position_m``, ``base_mass_kg``, ``base_com_m``,
