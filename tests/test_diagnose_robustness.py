@@ -41,7 +41,6 @@ from estimators.attitude_noise import (
 )
 from estimators.diagnostics.baseline import REREFERENCE_CHI2
 from estimators.diagnostics.diagnose import (
-    CLEAN_LOG_FAMILIES,
     NO_MISSING_EFFECT,
     ModelFit,
     attitude_gyro_dependence,
@@ -51,9 +50,7 @@ from estimators.diagnostics.diagnose import (
     low_frequency_p_value,
 )
 from estimators.diagnostics.model_fit import MIN_STEP_GAIN_CHI2
-from estimators.diagnostics.power import N_TESTS
 from estimators.diagnostics.suite import DIAGNOSTIC_EXCITATION, diagnosed_cells
-from estimators.diagnostics.verdict import held_likelihood_ratio
 from estimators.diagnostics.workflow import true_parameters
 from estimators.problem import IdentificationModel
 from spaceid_gym.datasets import simulate_episode
@@ -591,86 +588,3 @@ def test_a_clean_logs_channel_keeps_its_reference_at_the_gyro_alone_fit() -> Non
         d.baseline.theta, d.weights.gyro_std_rad_s, moved.fisher(d.baseline.theta, d.weights.attitude)
     )
     assert np.max(np.abs(refit.theta - d.baseline.theta) / std) < 0.25
-
-
-def test_a_clean_log_pays_the_false_alarm_budget_once() -> None:
-    """Clean log 9867 (``orbit7``, 20 Hz, 5 arcsec star tracker, noise x2.46; held out until this rule was designed on
-    it): its baseline residual's
-    Ljung-Box p-value on one axis lies between ``alpha / 6`` and ``alpha / 3``, so with ``alpha`` spent whole on the
-    whiteness test (and again on the candidates) it was ``unexplained``; the two families now share ``alpha``, the
-    residual passes at ``alpha / 2`` and the verdict is ``none``."""
-    env = simulate_variation(draw_variation("none", 9867), 60.0)
-    d = diagnose(IdentificationModel(env.robot, "fuel"), env.measurement_log())
-    assert d.verdict == NO_MISSING_EFFECT, d.reason
-    assert d.analysis.confidence == pytest.approx(1.0 - d.alpha / CLEAN_LOG_FAMILIES)
-    p = float(np.min(d.analysis.ljung_box_p))
-    assert d.alpha / 6 < p < d.alpha / 3, p
-    assert not any(f.significant for f in d.candidates)
-    # the candidates' half: each significant below alpha / 2 over the candidate fits, the divisor the power uses
-    assert all(f.significant == (f.p_value < d.alpha / N_TESTS) for f in d.candidates)
-
-
-def _scored_fit(effect: str | None, rss: float, n_params: int, attitude: float | None, held: float | None) -> ModelFit:
-    return ModelFit(
-        effects=(),
-        effect=effect,
-        theta=np.zeros(n_params),
-        names=tuple(f"x{i}" for i in range(n_params)),
-        rss=rss,
-        n_residuals=3000,
-        n_params=n_params,
-        attitude_chi2=attitude,
-        n_attitude_values=0 if attitude is None else 3000,
-        physical={},
-        implausible=[],
-        wall_time_s=0.0,
-        attitude_chi2_held=held,
-    )
-
-
-def test_the_held_likelihood_ratio_holds_the_baselines_error_model() -> None:
-    """The likelihood ratio a candidate is tested with: the gyro's gain plus the attitude's under the baseline's error
-    model; the profile likelihood ratio without attitude, and never more than it."""
-    sigma2 = 1.0
-    baseline = _scored_fit(None, 3000.0, 4, 2990.0, 2990.0)
-    profiled_more = _scored_fit("payload", 2995.0, 14, 2950.0, 2975.0)
-    assert held_likelihood_ratio(baseline, profiled_more, sigma2) == pytest.approx(5.0 + 15.0)
-    odd = _scored_fit("payload", 2995.0, 14, 2980.0, 2970.0)  # a held chi-square below the profile's: the profile bounds
-    assert held_likelihood_ratio(baseline, odd, sigma2) == pytest.approx(5.0 + 10.0)
-    no_attitude = (_scored_fit(None, 3000.0, 4, None, None), _scored_fit("delay", 2980.0, 5, None, None))
-    assert held_likelihood_ratio(*no_attitude, sigma2) == pytest.approx(20.0)
-
-
-def test_a_candidates_refitted_error_model_names_no_effect_on_a_clean_exact_log() -> None:
-    """Clean log 9821 (``quick3``, 20 Hz, noise-free attitude, noise x1.49; held out when it was named a payload): the
-    payload's fit took the attitude error model's wander to zero and gained 30.9 in the profile likelihood ratio, all
-    of it in the attitude channel, at p below the candidates' level. Tested with the baseline's error model held,
-    the payload gains what the data hold and the verdict is ``none``."""
-    env = simulate_variation(draw_variation("none", 9821), 60.0)
-    d = diagnose(IdentificationModel(env.robot, "fuel"), env.measurement_log())
-    assert d.verdict == NO_MISSING_EFFECT, d.reason
-    payload = d.fit_of("payload")
-    assert payload is not None and d.weights is not None
-    k = payload.n_params - d.baseline.n_params
-    # the profile ratio (30.9, p = 0.00061 against the candidates' 0.000625 then) took the wander to zero
-    assert payload.attitude_noise is not None and max(payload.attitude_noise.walk_std_rad) < 1e-10
-    assert payload.lr_statistic - payload.held_lr_statistic > 8.0
-    assert payload.p_value == pytest.approx(chi2.sf(payload.held_lr_statistic, k))
-    assert payload.p_value > 10 * d.alpha / N_TESTS and not payload.significant
-
-
-@pytest.mark.parametrize("seed", [10229, 10239])
-def test_a_baseline_left_in_another_basin_is_refitted_from_a_candidates_fit(seed: int) -> None:
-    """Fresh clean logs with a noise-free attitude, 10229 (``orbit7``, 50 Hz) and 10239 (``paper6``, 20 Hz): the
-    gyro-alone global search left the tank 0.4-0.8 m off (fuel z -7.4 and -11.7 after the two-channel fit), the
-    candidates reached the true basin, from their own points (10229) or restarted from global searches (10239), and
-    a delay (likelihood ratio 4100) and a gyro scale (1662) were named. The baseline is refitted from the best
-    candidate's unknowns with its effect off, which fit the model as given better, and the verdict is ``none``."""
-    env = simulate_variation(draw_variation("none", seed, {"attitude": "exact"}), 60.0)
-    model = IdentificationModel(env.robot, "fuel")
-    d = diagnose(model, env.measurement_log())
-    assert d.verdict == NO_MISSING_EFFECT, d.reason
-    assert d.reason.startswith("the baseline was refitted from the") and d.baseline_restarted_from is not None, d.reason
-    truth = true_parameters(model, truth_of(env))
-    assert truth is not None
-    assert np.max(np.abs(d.baseline.theta[1:] - truth[1:])) < 0.01  # the tank within 1 cm, 0.77 m off before
