@@ -69,6 +69,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -87,6 +88,7 @@ from estimators.diagnostics.model_fit import (
     difference_noise_std,
     fit_model,
     independent_attitude_channel,
+    joint_chi2,
     nuisance_basis,
 )
 
@@ -295,7 +297,8 @@ def _diagnose(
     """:func:`diagnose` from the estimator's ``baseline`` fit (gyro alone), with the attitude ``channel`` or without;
     once more from a candidate's base unknowns if they fit the model as given better than the baseline
     (:func:`_better_baseline_start`; ``restarted``: this is that second pass)."""
-    gyro_residual = model.problem(log).residuals(baseline.theta, count=False).reshape(-1, 3)
+    problem = model.problem(log)
+    gyro_residual = problem.residuals(baseline.theta, count=False).reshape(-1, 3)
     white_std = difference_noise_std(gyro_residual)
     weights = None
     if channel is not None:
@@ -312,7 +315,7 @@ def _diagnose(
         # the baseline's own error model weights every candidate's fit and is the reference of the log-determinants
         baseline.attitude_chi2 = baseline.attitude_chi2_held = channel.chi2(baseline.theta, weights.attitude)
     # the baseline's own unknowns, profiled out of every candidate's scan
-    basis = nuisance_basis(model.problem(log), baseline.theta, channel, weights)
+    basis = nuisance_basis(problem, baseline.theta, channel, weights)
     fits, variants_tried = [], 0
     n_values = baseline.n_residuals + baseline.n_attitude_values
     for name in names:
@@ -327,7 +330,6 @@ def _diagnose(
     _restart_the_closest(model, log, baseline, fits, white_std, weights, channel, family_alpha)
     _refit_nested_from_containers(model, log, fits, white_std, weights, channel)
     # after the restarts and refits above, which can carry a candidate into a basin the baseline never saw
-    problem = model.problem(log)
     better = (
         None if restarted else _better_baseline_start(problem, baseline, fits, _joint_value(problem, white_std, weights, channel))
     )
@@ -387,18 +389,12 @@ def _better_baseline_start(
 def _joint_value(
     problem: IdentificationProblem, white_std: float, weights: ChannelWeights | None, channel: AttitudeChannel | None
 ) -> Callable[[FloatArray], float]:
-    """``-2 log L`` of ``problem``'s model at its unknowns, up to a constant: the gyro's residual at ``white_std``
-    (rad/s) plus, with a ``channel``, the attitude's chi-square under ``weights``' error model."""
-
-    def value(x: FloatArray) -> float:
-        residual = problem.residuals(x, count=False)
-        attitude = 0.0
-        if channel is not None:
-            assert weights is not None
-            attitude = channel.chi2(x, weights.attitude)
-        return float(residual @ residual) / (white_std * white_std) + attitude
-
-    return value
+    """``-2 log L`` of ``problem``'s model at its unknowns, up to a constant: both channels' chi-square
+    (:func:`~estimators.diagnostics.model_fit.joint_chi2`) with a ``channel``, else the gyro's at ``white_std`` (rad/s)."""
+    if channel is not None:
+        assert weights is not None
+        return partial(joint_chi2, problem, channel, weights)
+    return lambda x: float(np.sum(problem.residuals(x, count=False) ** 2)) / (white_std * white_std)
 
 
 #: the closest candidate's gyro residual RMS, over the residual's white noise, above which its fit is taken to have

@@ -257,7 +257,7 @@ def fit_model(
             # the gyro's minimum nearest each start, the best of them by both channels, refined on both; then the
             # attitude error model refitted at this model's fit and the fit refined under it (profile likelihood)
             tried = [*results, *(np.clip(x, problem.parameters.lower, problem.parameters.upper) for x in starts)]
-            scores = [_joint_chi2(problem, channel, weights, x) for x in tried]
+            scores = [joint_chi2(problem, channel, weights, x) for x in tried]
             theta = _joint_fit(problem, channel, weights, tried[int(np.argmin(scores))])
             if profile_noise:
                 # the error model polished from the weights' to weigh the refinement (the score's own comes after it)
@@ -293,7 +293,8 @@ def fit_model(
     fit.attitude_noise = noise
     if channel is not None:
         assert weights is not None
-        fit.attitude_chi2_held = channel.chi2(theta, weights.attitude)
+        # under the weights' error model already when it was not refitted
+        fit.attitude_chi2_held = channel.chi2(theta, weights.attitude) if profile_noise else attitude_chi2
     return fit, estimate
 
 
@@ -360,7 +361,7 @@ def _joint_residuals(
     return np.concatenate((problem.residuals(theta) / weights.gyro_std_rad_s, channel.residuals(theta, weights.attitude)))
 
 
-def _joint_chi2(problem: IdentificationProblem, channel: AttitudeChannel, weights: ChannelWeights, theta: FloatArray) -> float:
+def joint_chi2(problem: IdentificationProblem, channel: AttitudeChannel, weights: ChannelWeights, theta: FloatArray) -> float:
     """The chi-square of both channels at ``theta`` (k,): what :func:`_joint_fit` minimises."""
     r = _joint_residuals(problem, channel, weights, theta)
     return float(r @ r)
