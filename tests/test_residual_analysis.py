@@ -30,6 +30,12 @@ from estimators.diagnostics.residuals import (
     periodogram,
     white_spectrum_level,
 )
+from estimators.diagnostics.residuals.correlation import (
+    LJUNG_BOX_NULL_DRAWS,
+    LJUNG_BOX_SIMULATED_ABOVE,
+    LJUNG_BOX_SIMULATED_BELOW,
+    ljung_box_null,
+)
 from spaceid_gym.errors import SpaceIdInputError
 
 DT_S = 0.02
@@ -131,7 +137,27 @@ def test_ljung_box_formula_and_chi2_p_value() -> None:
     q_direct = 400 * 402 * sum(r[k] ** 2 / (400 - k) for k in range(1, 11))
     q, p = ljung_box(x, 10)
     assert q == pytest.approx(q_direct, rel=1e-12)
+    assert stats.chi2.sf(q_direct, 10) >= LJUNG_BOX_SIMULATED_BELOW  # the chi-square's p-value is kept up there
     assert p == pytest.approx(stats.chi2.sf(q_direct, 10), rel=1e-10)
+
+
+def test_ljung_box_p_value_in_the_tail_is_the_simulated_nulls() -> None:
+    rng = np.random.default_rng(41)
+    x = rng.standard_normal((300, 400))
+    x[:, :200] += 0.25 * np.sin(0.3 * np.arange(300))[:, None]  # mild structure: p-values across the tail
+    q, p = ljung_box(x, 20)
+    chi2_p = stats.chi2.sf(q, 20)
+    null = ljung_box_null(300, 20)
+    assert null.size == LJUNG_BOX_NULL_DRAWS and np.all(np.diff(null) >= 0.0)
+    simulated = (chi2_p < LJUNG_BOX_SIMULATED_BELOW) & (chi2_p >= LJUNG_BOX_SIMULATED_ABOVE)
+    assert 20 < np.sum(simulated) < 380
+    count = np.array([np.sum(null >= v) for v in q[simulated]])
+    share = np.minimum((1.0 + count) / (null.size + 1.0), LJUNG_BOX_SIMULATED_BELOW)
+    expected = np.where(count > 0, share, np.minimum(chi2_p[simulated], 1.0 / (null.size + 1.0)))
+    assert np.allclose(p[simulated], expected, rtol=1e-12, atol=0.0)
+    assert np.array_equal(p[~simulated], chi2_p[~simulated])
+    order = np.argsort(q)
+    assert np.all(np.diff(p[order]) <= 1e-12)  # never increases with Q, across the three regimes
 
 
 def test_ljung_box_false_alarms_on_white_noise_are_about_alpha() -> None:
@@ -140,6 +166,19 @@ def test_ljung_box_false_alarms_on_white_noise_are_about_alpha() -> None:
     # Binomial(400, 0.01): mean 4; P(count >= 13) ~ 1e-4. p-values roughly uniform: P(<0.5) in [0.4, 0.6] (4 sigma)
     assert np.sum(p < 0.01) <= 12
     assert 0.4 < np.mean(p < 0.5) < 0.6
+
+
+def test_ljung_box_holds_its_level_in_the_tail_on_a_short_log() -> None:
+    # 60 s at 20 Hz over the diagnosis's 50 lags, at its level per gyro axis (0.005 / 3), 40000 white series:
+    # expected count 67 at the level. The binomial's sd 8 and the simulated null's own error (its tail quantile
+    # from 33 of 20000 draws, ~17 %, 11 counts) give an sd of about 14: 25-109 (3 sd). The chi-square
+    # approximation alone calls about 2.2 times the level structured (about 145 expected).
+    level, draws = 0.005 / 3, 40_000
+    rng = np.random.default_rng(20261129)
+    tests = [ljung_box(rng.standard_normal((1201, 2000)), 50) for _ in range(draws // 2000)]
+    q, p = np.concatenate([t[0] for t in tests]), np.concatenate([t[1] for t in tests])
+    assert 25 <= np.sum(p < level) <= 109
+    assert np.sum(stats.chi2.sf(q, 50) < level) > 1.5 * max(np.sum(p < level), 67)  # the reference it replaces
 
 
 def test_ljung_box_rejects_ar1_and_sinusoid() -> None:
