@@ -31,6 +31,7 @@ from estimators.diagnostics.residuals import (
     white_spectrum_level,
 )
 from estimators.diagnostics.residuals.correlation import (
+    LJUNG_BOX_CHI2_SAMPLES_PER_LAG,
     LJUNG_BOX_NULL_DRAWS,
     LJUNG_BOX_SIMULATED_ABOVE,
     LJUNG_BOX_SIMULATED_BELOW,
@@ -144,7 +145,7 @@ def test_ljung_box_formula_and_chi2_p_value() -> None:
 def test_ljung_box_p_value_in_the_tail_is_the_simulated_nulls() -> None:
     rng = np.random.default_rng(41)
     x = rng.standard_normal((300, 400))
-    x[:, :200] += 0.25 * np.sin(0.3 * np.arange(300))[:, None]  # mild structure: p-values across the tail
+    x += np.sin(0.3 * np.arange(300))[:, None] * np.linspace(0.0, 0.5, 400)  # from none to strong: across the tail
     q, p = ljung_box(x, 20)
     chi2_p = stats.chi2.sf(q, 20)
     null = ljung_box_null(300, 20)
@@ -158,6 +159,11 @@ def test_ljung_box_p_value_in_the_tail_is_the_simulated_nulls() -> None:
     assert np.array_equal(p[~simulated], chi2_p[~simulated])
     order = np.argsort(q)
     assert np.all(np.diff(p[order]) <= 1e-12)  # never increases with Q, across the three regimes
+    long = rng.standard_normal((LJUNG_BOX_CHI2_SAMPLES_PER_LAG * 20, 200))
+    long[:, :100] += 0.1 * np.sin(0.3 * np.arange(long.shape[0]))[:, None]
+    q_long, p_long = ljung_box(long, 20)
+    assert np.any(p_long < LJUNG_BOX_SIMULATED_BELOW)
+    assert np.array_equal(p_long, stats.chi2.sf(q_long, 20))  # enough samples per lag: the chi-square's own
 
 
 def test_ljung_box_false_alarms_on_white_noise_are_about_alpha() -> None:

@@ -65,8 +65,14 @@ def autocorrelation(x: ArrayLike, max_lag: int) -> FloatArray:
 LJUNG_BOX_NULL_DRAWS = 20_000
 
 #: chi-square p-values in ``[LJUNG_BOX_SIMULATED_ABOVE, LJUNG_BOX_SIMULATED_BELOW)`` are replaced by the simulated
-#: null's (:func:`ljung_box_null`): the chi-square's tail is too light on short logs (see :func:`ljung_box`)
-LJUNG_BOX_SIMULATED_BELOW = 0.05
+#: null's (:func:`ljung_box_null`): the chi-square's tail is too light on short logs (see :func:`ljung_box`). The
+#: tests of whiteness here are at 0.01 or below; above it the chi-square's p-value is kept
+LJUNG_BOX_SIMULATED_BELOW = 0.01
+
+#: the fewest samples per lag at which the chi-square's p-value is kept whatever its size: at 50 lags on 6001
+#: samples (120 per lag) it calls 0.87 times its level structured at 0.005 over three axes, on 3001 (60 per lag)
+#: 1.15-1.36 times at 0.0017-0.0008 (60000 white series each), on 1201 (24 per lag) 2.2-2.6 times
+LJUNG_BOX_CHI2_SAMPLES_PER_LAG = 100
 
 #: below this chi-square p-value the residual is structured at any level a diagnosis uses and the chi-square's own
 #: p-value is kept (no simulation): a three-moment fit of the simulated null puts the exact p-value at about 7e-6
@@ -109,6 +115,8 @@ def _ljung_box_from_acf(acf: FloatArray, n_samples: int) -> tuple[FloatArray, Fl
     q = _ljung_box_q(acf, n_samples)
     p = stats.chi2.sf(q, lags)
     tail = (p < LJUNG_BOX_SIMULATED_BELOW) & (p >= LJUNG_BOX_SIMULATED_ABOVE)
+    if n_samples >= LJUNG_BOX_CHI2_SAMPLES_PER_LAG * lags:
+        tail[:] = False
     if np.any(tail):
         null = ljung_box_null(n_samples, lags)
         beyond = null.size - np.searchsorted(null, q[tail], side="left")
@@ -126,7 +134,8 @@ def ljung_box(x: ArrayLike, lags: int) -> tuple[Any, Any]:
     removed for fitted model parameters: a physical model with a few parameters fitted to T >> h samples
     barely changes the distribution). The approximation's tail is too light when h is not small against T:
     at 50 lags on 1201 samples (60 s at 20 Hz) the chi-square calls 2.2 times its level structured at a
-    level of 0.0017, 1.4 times at 0.01 (``benchmarks/whiteness_null.py``). So a chi-square p-value below
+    level of 0.0017, 1.4 times at 0.01 (``benchmarks/whiteness_null.py``). So, on logs of fewer than
+    :data:`LJUNG_BOX_CHI2_SAMPLES_PER_LAG` samples per lag, a chi-square p-value below
     :data:`LJUNG_BOX_SIMULATED_BELOW` is replaced by the share of simulated white-noise statistics at least
     as large (:func:`ljung_box_null`, ``(1 + count) / (1 + draws)``, capped at the switch, an exact test up to the simulation's
     own error, about 25 % relative at a level of 1e-3); beyond every simulated statistic, and wherever the
