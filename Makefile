@@ -15,7 +15,7 @@ STAMP := $(VENV)/.installed
 LOCK := requirements.lock
 LOCK_ARGS ?=
 
-.PHONY: demo test lint docs bench install lock
+.PHONY: demo test lint docs bench install lock kernels
 
 # torch in the lock is the CPU build, torch==2.13.0+cpu, from the local wheel in /opt/wheels (the
 # --find-links line and the hash in the lock are that file's): any other torch spec pulls several
@@ -24,9 +24,19 @@ $(STAMP): pyproject.toml $(LOCK)
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --require-hashes -r $(LOCK)
 	$(BIN)/pip install --quiet --no-deps --no-build-isolation -e .
+	$(MAKE) --no-print-directory kernels
 	touch $(STAMP)
 
 install: $(STAMP)
+
+# Compile the numba kernels into their cache (__pycache__ beside each module) once, with a short simulation (fused
+# attitude, slosh), its diagnosis and a short arm simulation: otherwise the first run compiles them, in each test
+# worker at once (about 170 s of a cold test run on 2 cores). A kernel whose module changes is compiled again on use.
+kernels:
+	@tmp=$$(mktemp -d) && trap 'rm -rf "$$tmp"' EXIT && echo "make: compiling the numba kernels (about 2 minutes)" && \
+	$(BIN)/spaceid simulate --duration 8 --attitude fused --hidden-effects slosh --out "$$tmp/log" > /dev/null && \
+	$(BIN)/spaceid diagnose --robot paper6 --log "$$tmp/log/log.csv" --params fuel --out "$$tmp/diagnosis" > /dev/null && \
+	$(BIN)/spaceid arm simulate --duration 2 --out "$$tmp/arm" > /dev/null
 
 # Python 3.11; the project itself is left out of the lock (--unsafe-package), pip and setuptools are pinned
 lock: $(STAMP)
