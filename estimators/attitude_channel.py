@@ -407,8 +407,8 @@ class AttitudeChannel:
         at ``theta`` (:meth:`estimate_noise`), differences of it between models are profile likelihood ratios: the
         error model is a nuisance refitted under each model, so a model that explains structure the error model had
         absorbed as the model's own wander gains its log-determinant, and one that explains nothing gains nothing."""
-        n_steps = len(self.measured)
-        return self.chi2(theta, noise) + noise.log_det(n_steps) - reference.log_det(n_steps)
+        n_differences = len(self._measured_steps)  # as whitened (:meth:`_factors`): T - 2 values per axis
+        return self.chi2(theta, noise) + noise.log_det(n_differences) - reference.log_det(n_differences)
 
     def _factors(self, noise: AttitudeNoise) -> list[FloatArray]:
         """The whitening factors of ``noise``, cached for the last noise model asked."""

@@ -84,15 +84,17 @@ class AttitudeNoise:
         return np.asarray(self.walk_std_rad) / np.sqrt(1.0 - np.asarray(self.walk_correlation) ** 2)
 
     def factors(self, n_steps: int) -> list[FloatArray]:
-        """Per axis, the lower banded Cholesky factor (3, n_steps - 1) of the filtered differences' covariance."""
+        """Per axis, the lower banded Cholesky factor (3, n_steps - 1) of the covariance of the filtered differences
+        ``u`` of ``n_steps`` differences (a log of ``n_steps + 1`` samples: ``n_steps - 1`` values of ``u``)."""
         return [
             _filtered_factor(white, walk, phi, n_steps - 1)
             for white, walk, phi in zip(self.white_std_rad, self.walk_std_rad, self.walk_correlation, strict=True)
         ]
 
     def log_det(self, n_steps: int) -> float:
-        """``log det`` of the covariance of the filtered differences of a log of ``n_steps`` samples (all three axes):
-        the term that, added to the chi-square, makes ``-2 log L`` comparable across error models."""
+        """``log det`` of the covariance of the filtered differences of ``n_steps`` differences (all three axes; the
+        values :meth:`whiten` gives for them): the term that, added to the chi-square, makes ``-2 log L`` comparable
+        across error models."""
         return float(sum(2.0 * np.sum(np.log(factor[0])) for factor in self.factors(n_steps)))
 
     def whiten(self, differences: FloatArray, factors: list[FloatArray] | None = None) -> FloatArray:

@@ -29,6 +29,7 @@ from estimators.attitude_channel import (
 )
 from estimators.attitude_integration import midpoint_log
 from estimators.attitude_noise import (
+    MIN_STD_RAD,
     SIMPLEX_F_TOLERANCE,
     SIMPLEX_MAX_EVALUATIONS,
     SIMPLEX_X_TOLERANCE,
@@ -371,6 +372,45 @@ def test_attitude_noise_round_trip_and_bad_values() -> None:
     with pytest.raises(Exception, match="white_std_rad"):
         AttitudeNoise((-1e-6, 0.0, 0.0), (0.0,) * 3)
     assert chi2.sf(0.0, 3) == 1.0  # the low-frequency test's tail on an empty excess
+
+
+def _dense_minus_two_log_likelihood(differences: np.ndarray, noise: AttitudeNoise) -> float:
+    """``-2 log L`` (less the constant) of differences (n, 3) under ``noise``, from the dense covariance of the filtered
+    differences ``u_k = d_k - phi d_{k-1}`` (n - 1 per axis): the MA(2) of the white part, ``w_k - (1 + phi) w_{k-1}
+    + phi w_{k-2}``, plus the walk's innovation (each std at least ``MIN_STD_RAD``, as the model defines it)."""
+    total = 0.0
+    for axis in range(3):
+        sw2, snu2 = (max(v[axis], MIN_STD_RAD) ** 2 for v in (noise.white_std_rad, noise.walk_std_rad))
+        phi = noise.walk_correlation[axis]
+        d = differences[:, axis]
+        u = d[1:] - phi * d[:-1]
+        m = len(u)
+        cov = np.diag(np.full(m, sw2 * (1.0 + (1.0 + phi) ** 2 + phi**2) + snu2))
+        for lag, value in ((1, -sw2 * (1.0 + phi) ** 2), (2, sw2 * phi)):
+            cov += value * (np.eye(m, k=lag) + np.eye(m, k=-lag))
+        total += float(u @ np.linalg.solve(cov, u)) + float(np.linalg.slogdet(cov)[1])
+    return total
+
+
+def test_the_profile_chi_square_is_minus_two_log_likelihood_with_a_dense_covariance() -> None:
+    """The profile chi-square's log-determinant counts the values the chi-square whitens (T - 2 per axis): between
+    two error models its difference is that of ``-2 log L`` from the dense covariance (it counted T - 1 before)."""
+    env = simulate_variation(draw_variation("none", 9615, {"attitude": "exact", "rate_hz": 50}), 3.0)
+    log, truth = env.measurement_log(), truth_of(env)
+    model = IdentificationModel(env.robot, "fuel")
+    theta = true_parameters(model, truth)
+    channel = AttitudeChannel.of(model, log, reference=theta)
+    assert theta is not None and channel is not None
+    differences = channel.differences(theta) @ channel.axes  # whitened in the noise axes, as the channel does
+    fitted = channel.estimate_noise(theta)
+    other = AttitudeNoise(tuple(3.0 * np.asarray(fitted.white_std_rad)), (2e-7, 1e-7, 3e-7), (0.0, 0.5, 0.9))
+    for noise in (fitted, other):
+        assert noise.log_det(len(differences)) + channel.chi2(theta, noise) == pytest.approx(
+            _dense_minus_two_log_likelihood(differences, noise), rel=1e-9
+        )
+    profile = channel.profile_chi2(theta, other, fitted) - channel.profile_chi2(theta, fitted, fitted)
+    dense = _dense_minus_two_log_likelihood(differences, other) - _dense_minus_two_log_likelihood(differences, fitted)
+    assert profile == pytest.approx(dense, rel=1e-9, abs=1e-6)
 
 
 @pytest.mark.parametrize("gain", [0.05, 0.2])
