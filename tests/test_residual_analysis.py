@@ -35,6 +35,7 @@ from estimators.diagnostics.residuals.correlation import (
     LJUNG_BOX_NULL_DRAWS,
     LJUNG_BOX_SIMULATED_ABOVE,
     LJUNG_BOX_SIMULATED_BELOW,
+    _ljung_box_from_acf,
     ljung_box_null,
 )
 from spaceid_gym.errors import SpaceIdInputError
@@ -164,6 +165,28 @@ def test_ljung_box_p_value_in_the_tail_is_the_simulated_nulls() -> None:
     q_long, p_long = ljung_box(long, 20)
     assert np.any(p_long < LJUNG_BOX_SIMULATED_BELOW)
     assert np.array_equal(p_long, stats.chi2.sf(q_long, 20))  # enough samples per lag: the chi-square's own
+
+
+def test_ljung_box_p_value_at_the_edges_of_the_simulated_tail() -> None:
+    # statistics placed exactly through the lag-1 autocorrelation alone: Q = T (T+2) r_1^2 / (T-1)
+    n_samples, lags = 1201, 50
+    null = ljung_box_null(n_samples, lags)
+
+    def p_of(q: np.ndarray) -> np.ndarray:
+        acf = np.zeros((lags + 1, len(q)))
+        acf[0] = 1.0
+        acf[1] = np.sqrt(q * (n_samples - 1) / (n_samples * (n_samples + 2.0)))
+        return _ljung_box_from_acf(acf, n_samples)[1]
+
+    beyond = 1.01 * null[-1]  # beyond every simulated statistic, its chi-square p-value above the switch to 1e-8
+    assert LJUNG_BOX_SIMULATED_ABOVE < stats.chi2.sf(beyond, lags) < 1.0 / (null.size + 1.0)
+    just_below = stats.chi2.isf(0.0099, lags)  # simulated, and capped: the chi-square's tail is too light here
+    at_switch = stats.chi2.isf(LJUNG_BOX_SIMULATED_BELOW, lags) * (1.0 - 1e-12)
+    p = p_of(np.array([beyond, just_below, at_switch, null[-1] * (1.0 - 1e-9), null[-2] * (1.0 - 1e-9)]))
+    assert p[0] == pytest.approx(stats.chi2.sf(beyond, lags), rel=1e-12)
+    assert p[1] == LJUNG_BOX_SIMULATED_BELOW and p[2] == pytest.approx(LJUNG_BOX_SIMULATED_BELOW, rel=1e-9)
+    assert p[3] == pytest.approx(2.0 / (null.size + 1.0), rel=1e-12)  # just below the largest draw: it counts
+    assert p[4] == pytest.approx(3.0 / (null.size + 1.0), rel=1e-12)
 
 
 def test_ljung_box_false_alarms_on_white_noise_are_about_alpha() -> None:

@@ -53,7 +53,7 @@ For a model (robot, parameterisation, effects already in it) and a log, :func:`d
    ``alpha``); ``"unexplained"`` otherwise, with the residual structure described (dominant frequencies, correlated
    inputs, where in time). A clean log of a model that describes it is thus given another verdict than ``none`` with
    probability at most ``alpha`` where each test holds its level (the whiteness test's tail is simulated for that:
-   its chi-square approximation called 2.1 times its level on 60 s at 20 Hz, ``benchmarks/whiteness_null.py``;
+   its chi-square approximation called 1.9 times its level on 60 s at 20 Hz, ``benchmarks/whiteness_null.py``;
    :func:`~estimators.diagnostics.residuals.ljung_box`). A significant candidate's own residual is
    tested at the same ``alpha / 2`` before it is named.
 

@@ -69,14 +69,16 @@ LJUNG_BOX_NULL_DRAWS = 20_000
 #: tests of whiteness here are at 0.01 or below; above it the chi-square's p-value is kept
 LJUNG_BOX_SIMULATED_BELOW = 0.01
 
-#: the fewest samples per lag at which the chi-square's p-value is kept whatever its size: at 50 lags on 6001
-#: samples (120 per lag) it calls 0.87 times its level structured at 0.005 over three axes, on 3001 (60 per lag)
-#: 1.15-1.36 times at 0.0017-0.0008 (60000 white series each), on 1201 (24 per lag) 2.2-2.6 times
-LJUNG_BOX_CHI2_SAMPLES_PER_LAG = 100
+#: the fewest samples per lag at which the chi-square's p-value is kept whatever its size (the simulation's cost grows
+#: with the samples: about 1 s per 1000): at 50 lags on 6001 samples (120 per lag) the chi-square calls a log's three
+#: axes structured 1.18 +- 0.10 times as often as their level of 0.005 says (20000 logs), on 3001 (60 per lag) 1.22
+#: +- 0.12 times, on 1201 (24 per lag) 1.90 +- 0.14 times; a 60 s log at up to 100 Hz is simulated
+LJUNG_BOX_CHI2_SAMPLES_PER_LAG = 200
 
 #: below this chi-square p-value the residual is structured at any level a diagnosis uses and the chi-square's own
-#: p-value is kept (no simulation): a three-moment fit of the simulated null puts the exact p-value at about 7e-6
-#: there at 50 lags on 301 samples, 1.4e-7 on 1201 samples
+#: p-value is kept (no simulation): the simulated null's share beyond it is 1.5e-4 at 16 lags on 64 samples, 2.5e-4
+#: at 50 on 200, 1e-4 at 50 on 301 and 5e-5 (none of the 20000) at 50 on 1201, all below the diagnosis's whiteness
+#: level (0.00167); the chi-square's p-value is that much too small there
 LJUNG_BOX_SIMULATED_ABOVE = 1e-8
 
 #: the seed of the simulated null (a fixed draw: the same statistic gets the same p-value in every run)
@@ -133,15 +135,18 @@ def ljung_box(x: ArrayLike, lags: int) -> tuple[Any, Any]:
     Under "x is Gaussian white noise" Q is approximately chi2(h) (h = ``lags``; no degrees of freedom are
     removed for fitted model parameters: a physical model with a few parameters fitted to T >> h samples
     barely changes the distribution). The approximation's tail is too light when h is not small against T:
-    at 50 lags on 1201 samples (60 s at 20 Hz) the chi-square calls 2.2 times its level structured at a
-    level of 0.0017, 1.4 times at 0.01 (``benchmarks/whiteness_null.py``). So, on logs of fewer than
+    at 50 lags on 1201 samples (60 s at 20 Hz) the chi-square calls one white series structured 2.2 times as
+    often as its level of 0.0017 says, 1.4 times at 0.01 (60000 series), and a log's three gyro axes 1.9 times at
+    0.005 over the three (``benchmarks/whiteness_null.py``). So, on logs of fewer than
     :data:`LJUNG_BOX_CHI2_SAMPLES_PER_LAG` samples per lag, a chi-square p-value below
     :data:`LJUNG_BOX_SIMULATED_BELOW` is replaced by the share of simulated white-noise statistics at least
     as large (:func:`ljung_box_null`, ``(1 + count) / (1 + draws)``, capped at the switch, an exact test up to the simulation's
     own error, about 25 % relative at a level of 1e-3); beyond every simulated statistic, and wherever the
     chi-square's p-value is below :data:`LJUNG_BOX_SIMULATED_ABOVE`, the chi-square's smaller p-value is kept
-    (there the residual is structured at any level of interest; that p-value is too small, by up to about
-    1000 times at 1e-8 on the shortest logs). A small p-value says the residual has autocorrelation: structure.
+    (there the residual is structured at any level of interest; that p-value is too small, by 10^4 times at 1e-8 on
+    the shortest logs). Between the chi-square's 0.99 point and the simulated one the p-value is 0.01 (the cap), for
+    any test at a level above 0.01 it is the chi-square's. A small p-value says the residual has autocorrelation:
+    structure.
 
     Args:
         x: (T,) or (T, C).
