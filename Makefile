@@ -32,6 +32,7 @@ install: $(STAMP)
 # Compile the numba kernels into their cache (__pycache__ beside each module) once, with a short simulation (fused
 # attitude, slosh), its diagnosis and a short arm simulation: otherwise the first run compiles them, in each test
 # worker at once (about 170 s of a cold test run on 2 cores). A kernel whose module changes is compiled again on use.
+# It runs in the virtualenv's install (a plain `make kernels` needs the virtualenv there already).
 kernels:
 	@tmp=$$(mktemp -d) && trap 'rm -rf "$$tmp"' EXIT && echo "make: compiling the numba kernels (about 2 minutes)" && \
 	$(BIN)/spaceid simulate --duration 8 --attitude fused --hidden-effects slosh --out "$$tmp/log" > /dev/null && \

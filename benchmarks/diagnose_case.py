@@ -9,13 +9,14 @@ effect's fit. With ``--delay-at-truth`` (a ``delay`` log):
 the delay that fits best with every other unknown at the truth, and the residual at the true delay over the noise, at
 the log's own rate and at 50 and 100 Hz (the same draw, the rate changed). With ``--held-noise`` (a log with attitude):
 each candidate's attitude gain again, its fit refined with the attitude error model held at the baseline's instead of
-refitted (profiled) at the candidate.
+refitted (profiled) at the candidate. With ``--noise-seed``: the same motion measured with new noise.
 
     python benchmarks/diagnose_case.py none 9737
     python benchmarks/diagnose_case.py delay 9759 --delay-at-truth
     python benchmarks/diagnose_case.py none 9821 --rate 50
     python benchmarks/diagnose_case.py none 9821 --held-noise
     python benchmarks/diagnose_case.py none 10229 --attitude exact
+    python benchmarks/diagnose_case.py none 10238 --attitude exact --noise-seed 1
 """
 
 from __future__ import annotations
@@ -94,13 +95,17 @@ def main() -> None:
     parser.add_argument("--rate", type=int, default=None, help="the sample rate pinned (Hz; the draw's otherwise)")
     parser.add_argument("--attitude", default=None, help="the attitude source pinned (as the suite's --fix attitude=...)")
     parser.add_argument("--held-noise", action="store_true", help="attitude gains with the baseline's error model held")
+    parser.add_argument(
+        "--noise-seed", type=int, default=None, help="the same motion measured with new noise (the env's noise_seed)"
+    )
     args = parser.parse_args()
     fixed = {} if args.rate is None else {"rate_hz": args.rate}
     if args.attitude is not None:
         fixed["attitude"] = args.attitude
     case = draw_variation(args.effect, args.seed, fixed or None)
-    print(f"{args.effect} {args.seed}: {case.robot}, {case.rate_hz} Hz, {case.attitude}, noise x{case.noise_scale:.2f}")
-    env = simulate_variation(case, args.seconds)
+    redrawn = "" if args.noise_seed is None else f", noise seed {args.noise_seed}"
+    print(f"{args.effect} {args.seed}: {case.robot}, {case.rate_hz} Hz, {case.attitude}, noise x{case.noise_scale:.2f}{redrawn}")
+    env = simulate_variation(case, args.seconds, noise_seed=args.noise_seed)
     model, log, truth = IdentificationModel(env.robot, "fuel"), env.measurement_log(), truth_of(env)
     d = diagnose(model, log)
     print(f"verdict {d.verdict}: {d.reason}")
