@@ -284,7 +284,11 @@ def fit_model(
             noise = channel.estimate_noise(theta, weights.attitude)
         whitened = channel.residuals(theta, noise)
         attitude_chi2 = channel.profile_chi2(theta, noise, weights.attitude)
-        attitude_information = channel.fisher(theta, noise)
+        # the plausibility's covariance with the error model held at the weights' (the baseline's), as the test holds
+        # it: a candidate's own refit can take the wander to zero and overstate the attitude's information (payload
+        # log 10434: a physical payload 0.03 attitude units from the fit judged 5.6 std unphysical; the Fisher form
+        # to it was 90.8 under the candidate's error model, 0.07 under the baseline's)
+        attitude_information = channel.fisher(theta, weights.attitude)
         attitude_white_p = low_frequency_p_value(whitened.reshape(-1, 3), ATTITUDE_BLOCK_S / float(np.mean(np.diff(log.t_s))))
     n_attitude = 0 if channel is None else channel.n_values
     fit = _scored(problem, theta, model, effect, (attitude_chi2, n_attitude), attitude_information, weights)
@@ -401,7 +405,8 @@ def _scored(
     """The fit at ``theta``: gyro residual, plausibility, and ``attitude`` (its chi-square or ``None``, its values).
 
     Plausibility allows for the Cramér-Rao covariance of the channels fitted: the gyro's (at ``weights``' gyro
-    noise when given) plus ``attitude_information`` (k, k), the star tracker's Fisher information, when given."""
+    noise when given) plus ``attitude_information`` (k, k), the star tracker's Fisher information under the weights'
+    (the baseline's) error model, when given."""
     residual = problem.residuals(theta, count=False)
     params = problem.parameters
     implausible: list[str] = []
