@@ -30,7 +30,7 @@ from spaceid_gym.demo import run_demo
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.executors import add_executor_arguments
 from spaceid_gym.free_floating_cli import run_compare, run_diagnose_or_report, run_identify, run_simulate
-from spaceid_gym.harness_cli import run_diagnose_suite, run_evaluate
+from spaceid_gym.harness_cli import run_diagnose_suite, run_evaluate, run_pool_matrix
 from spaceid_gym.sim.sensors import ATTITUDE_SOURCES
 from spaceid_gym.tracking import add_track_arguments, run_track
 
@@ -203,6 +203,18 @@ def _parser() -> argparse.ArgumentParser:
     add_executor_arguments(suite)
     suite.add_argument("--out", type=Path, required=True, help="output folder")
 
+    pool = sub.add_parser(
+        "pool-matrix",
+        help="pool runs of 'diagnose-suite --matrix' (other seeds, machines or pinned axes) into one table per cell",
+    )
+    pool.add_argument("runs", nargs="+", type=Path, help="run folders (each with matrix.csv and summary.json)")
+    pool.add_argument(
+        "--mixed-code",
+        action="store_true",
+        help="pool runs made by different code versions (only where the diagnosis did not change between them)",
+    )
+    pool.add_argument("--out", type=Path, required=True, help="output folder")
+
     arm = sub.add_parser("arm", help="fixed-base manipulators (UR5): simulate, identify, cross-validate, diagnose")
     arm_sub = arm.add_subparsers(dest="arm_command", required=True)
     add_arm_simulate_arguments(arm_sub.add_parser("simulate", help="simulate an arm with friction and write a dataset folder"))
@@ -253,6 +265,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             run_diagnose_or_report(args)
         elif args.command == "diagnose-suite":
             return run_diagnose_suite(args)
+        elif args.command == "pool-matrix":
+            return run_pool_matrix(args)
         elif args.command == "excite":
             run_excite(args)
         elif args.command == "track":

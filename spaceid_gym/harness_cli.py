@@ -1,6 +1,7 @@
 """Bodies of the commands that run a harness over many simulated logs: ``spaceid evaluate`` (the estimators against the
 truth, :mod:`estimators.evaluation`) and ``spaceid diagnose-suite`` (the diagnosis on logs with each effect hidden,
-and the variation matrix, :mod:`estimators.diagnostics.suite`); wired into :mod:`spaceid_gym.cli`, which defines their
+and the variation matrix, :mod:`estimators.diagnostics.suite`) and ``spaceid pool-matrix`` (matrix runs pooled,
+:mod:`estimators.diagnostics.matrix_pool`); wired into :mod:`spaceid_gym.cli`, which defines their
 arguments.
 """
 
@@ -13,6 +14,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from estimators.diagnostics.matrix import run_matrix, write_matrix
+from estimators.diagnostics.matrix_pool import pool_matrix_runs, read_matrix_run
 from estimators.diagnostics.suite import (
     DIAGNOSTIC_EXCITATION,
     SUITE_EFFECTS,
@@ -113,6 +115,14 @@ def _diagnose_matrix(args: argparse.Namespace, effects: tuple[str, ...], runs: d
         raise SpaceIdInputError(f"--fix: {exc}") from None
     info: dict[str, object] = {"matrix": True, **runs, "fixed": fixed, "axis_values": AXIS_VALUES, "axis_ranges": AXIS_RANGES}
     rows = _timed_run(info, lambda: run_matrix(effects, args.seeds, args.first_seed, executor, args.duration, fixed))
+    return _report_suite(rows, write_matrix(args.out, rows, info), info)
+
+
+def run_pool_matrix(args: argparse.Namespace) -> int:
+    """``spaceid pool-matrix``: the runs' rows pooled and written as one matrix run; exit code 1 (after writing) if
+    any pooled log's diagnosis had raised in its run."""
+    rows, info = pool_matrix_runs([read_matrix_run(path) for path in args.runs], args.mixed_code)
+    info["executor"] = f"pooled from {len(args.runs)} runs"
     return _report_suite(rows, write_matrix(args.out, rows, info), info)
 
 

@@ -6,15 +6,14 @@ from __future__ import annotations
 import csv
 import dataclasses
 import json
-import math
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
-from suite_rows import diagnosed_row
+from suite_rows import matrix_row
 
-from estimators.diagnostics import matrix, suite
+from estimators.diagnostics import matrix
 from estimators.diagnostics.diagnose import candidate_model
 from estimators.diagnostics.power import effect_dof, expected_power, non_centrality, power_of, separation, wins_bic
 from estimators.least_squares import LevenbergMarquardt
@@ -223,22 +222,10 @@ def test_the_separation_from_a_rival_is_what_the_rivals_best_fit_leaves() -> Non
     assert wins_bic(6.0, 4, 3, 3000) == pytest.approx(np.mean(x - y > np.log(3000)), abs=0.004)
 
 
-def _matrix_row(effect: str, seed: int, duration_s: float = 60.0, fixed: dict[str, Any] | None = None) -> dict[str, Any]:
-    """A row as :func:`matrix.guarded_variation` returns it, without the simulation: the drawn case's cells, a power
-    of 0.95 on even seeds (0.5 on odd), the verdict right except on seed 2, an error on seed 3."""
-    case = draw_variation(effect, seed, fixed)
-    row = {"effect": effect, "seed": seed, **case.axes(), "magnitude": case.magnitude or math.nan, "fuel_consumed_kg": 1.0}
-    if seed == 3:
-        return {**row, "verdict": suite.ERROR_VERDICT, "correct": False, "error": "ValueError: broken (x.py:1 in f)"}
-    row.update(diagnosed_row(effect, seed, "payload" if seed == 2 else None), rms_over_noise_after=1.0)
-    row["expected_power"] = 0.95 if seed % 2 == 0 else 0.5
-    return row
-
-
 def test_the_matrix_counts_eligible_logs_writes_every_row_and_fails_on_an_error(
     monkeypatch: pytest.MonkeyPatch, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    monkeypatch.setattr(matrix, "guarded_variation", _matrix_row)
+    monkeypatch.setattr(matrix, "guarded_variation", matrix_row)
     code = main(
         ["diagnose-suite", "--matrix", "--seeds", "4", "--effects", "gyro_bias", "--fix", "robot=paper6", "--out", str(tmp_path)]
     )

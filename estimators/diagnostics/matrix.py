@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy.stats import beta, binom
 
 from estimators.diagnostics.diagnose import NO_MISSING_EFFECT
 from estimators.diagnostics.power import expected_power, separation
@@ -36,6 +37,14 @@ from spaceid_gym.variations import (
 #: a log is *eligible* (its verdict counted in the matrix's figures) when the expected power of ``diagnose``'s test of
 #: its hidden effect is at least this (:func:`estimators.diagnostics.power.expected_power`); every clean log is
 ELIGIBLE_POWER = 0.9
+
+#: the targets of a cell (issue 19's 'done when'): the hidden effect named on at least ``TARGET_NAMED`` of the eligible
+#: logs, a clean log ``none`` on at least ``TARGET_CLEAN``; after naming, the gyro residual's RMS at most
+#: ``TARGET_RESIDUAL`` times the noise on every log, the fuel error's RMS at most ``TARGET_FUEL_Z`` Cramér-Rao std
+TARGET_NAMED, TARGET_CLEAN, TARGET_RESIDUAL, TARGET_FUEL_Z = 0.90, 0.95, 1.1, 1.5
+
+#: the confidence of the lower bound on a cell's share of right verdicts (``correct_lower_bound``, one-sided)
+BOUND_CONFIDENCE = 0.95
 
 
 def run_variation(case: VariationCase, duration_s: float = 60.0) -> dict[str, Any]:
@@ -110,6 +119,8 @@ def summarise_matrix(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     :func:`spaceid_gym.variations.axis_label`): ``logs``; ``eligible``: logs whose expected power is at least
     :data:`ELIGIBLE_POWER` (a clean log: every one; a log whose power is unknown, not); ``correct``: eligible logs whose
     verdict names the hidden effect (clean logs: ``none``), ``correct_percent`` of the eligible (NaN without any);
+    ``correct_lower_bound``: the one-sided :data:`BOUND_CONFIDENCE` Clopper-Pearson lower bound on the share of right
+    verdicts that ``correct`` of ``eligible`` shows (NaN without eligible logs; 0.74 for 10 of 10, 0.86 for 20 of 20);
     ``undecided``: eligible logs named wrongly but with the hidden effect among the verdict's rivals (the log hardly
     tells them apart, :func:`~estimators.diagnostics.verdict.rivals`); ``separable``: eligible logs whose
     ``separation_power`` is at least :data:`ELIGIBLE_POWER` too (clean logs: every one), ``separable_correct`` the
@@ -154,6 +165,7 @@ def _matrix_cell(effect: str, axis: str, value: str, rows: list[dict[str, Any]])
         "eligible": len(eligible),
         "correct": len(correct),
         "correct_percent": 100.0 * len(correct) / len(eligible) if eligible else math.nan,
+        "correct_lower_bound": share_lower_bound(len(correct), len(eligible)),
         "undecided": sum(1 for r in eligible if not r["correct"] and r["effect"] in str(r.get("rivals", "")).split(";")),
         "separable": len(separable),
         "separable_correct": sum(1 for r in separable if r["correct"]),
@@ -162,6 +174,45 @@ def _matrix_cell(effect: str, axis: str, value: str, rows: list[dict[str, Any]])
         "fuel_z_rms_after": _fuel_z_rms(correct),
         "wall_time_s_mean": float(np.mean([r["wall_time_s"] for r in ran])) if ran else math.nan,
     }
+
+
+def share_lower_bound(successes: int, trials: int, confidence: float = BOUND_CONFIDENCE) -> float:
+    """The one-sided Clopper-Pearson lower bound on a binomial share at ``confidence``: the share below which
+    ``successes`` of ``trials`` or more would have had probability at most ``1 - confidence``; 0 without a success,
+    NaN without a trial."""
+    if not 0 <= successes <= trials:
+        raise ValueError(f"share_lower_bound: expected 0 <= successes <= trials, got {successes} of {trials}")
+    if trials == 0:
+        return math.nan
+    return 0.0 if successes == 0 else float(beta.ppf(1.0 - confidence, successes, trials - successes + 1))
+
+
+def short_of_targets(summary: list[dict[str, Any]]) -> list[str]:
+    """Every cell of :func:`summarise_matrix` (every log of an effect, and each axis value) that misses a target
+    (:data:`TARGET_NAMED` or :data:`TARGET_CLEAN` of the eligible logs named right, :data:`TARGET_RESIDUAL`,
+    :data:`TARGET_FUEL_Z`), one line each: the cell, its counts and what it misses. A share below the target comes with
+    the probability of so few right verdicts if the true share were the target (binomial): a small cell misses a
+    target by chance often (4 of 5 at 90 %: 0.41). A cell without eligible logs misses nothing."""
+    lines = []
+    for s in summary:
+        if not s["eligible"]:
+            continue
+        target = TARGET_CLEAN if s["effect"] == NO_MISSING_EFFECT else TARGET_NAMED
+        misses = []
+        if s["correct"] < target * s["eligible"]:
+            chance = float(binom.cdf(s["correct"], s["eligible"], target))
+            misses.append(
+                f"named right {s['correct']}/{s['eligible']} (target {100 * target:.0f} %; as few has probability "
+                f"{chance:.2g} at the target share)"
+            )
+        if s["rms_over_noise_after_max"] > TARGET_RESIDUAL:
+            misses.append(f"residual after naming up to {s['rms_over_noise_after_max']:.3f} x noise (target {TARGET_RESIDUAL:g})")
+        if s["fuel_z_rms_after"] > TARGET_FUEL_Z:
+            misses.append(f"fuel z RMS {s['fuel_z_rms_after']:.2f} (target {TARGET_FUEL_Z:g})")
+        if misses:
+            where = "every log" if s["axis"] == "all" else f"{s['axis']} {s['value']}"
+            lines.append(f"{s['effect']}, {where} ({s['logs']} logs, {s['eligible']} eligible): {'; '.join(misses)}")
+    return lines
 
 
 def _fuel_z_rms(rows: list[dict[str, Any]]) -> float:
@@ -182,7 +233,8 @@ def _fraction_cell(entry: dict[str, Any] | None) -> str:
 
 def matrix_markdown(summary: list[dict[str, Any]]) -> str:
     """The matrix summary as Markdown: every log per effect, then one block per axis (rows: the effects with logs
-    there; columns: the axis's values; cells ``correct/eligible (%)``)."""
+    there; columns: the axis's values; cells ``correct/eligible (%)``), then the cells short of a target
+    (:func:`short_of_targets`)."""
     entries = {(s["effect"], s["axis"], s["value"]): s for s in summary}
     effects = list(dict.fromkeys(s["effect"] for s in summary))
     lines = [
@@ -190,14 +242,16 @@ def matrix_markdown(summary: list[dict[str, Any]]) -> str:
         "names the hidden effect (clean logs: none). Separable: eligible, and the effect beats its nearest rival "
         f"candidate with probability >= {ELIGIBLE_POWER:g} (separation power).",
         "",
-        "| hidden effect | logs | eligible | correct | wrong, truth a rival | correct where separable "
+        f"Lower bound: the share of right verdicts is above it with confidence {BOUND_CONFIDENCE:g} (Clopper-Pearson).",
+        "",
+        "| hidden effect | logs | eligible | correct | lower bound | wrong, truth a rival | correct where separable "
         "| RMS/noise after: mean, max | fuel z RMS after | s/log |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for effect in effects:
         s = entries[(effect, "all", "all")]
         lines.append(
-            f"| {effect} | {s['logs']} | {s['eligible']} | {_fraction_cell(s)} | {s['undecided']} | "
+            f"| {effect} | {s['logs']} | {s['eligible']} | {_fraction_cell(s)} | {s['correct_lower_bound']:.2f} | {s['undecided']} | "
             f"{s['separable_correct']}/{s['separable']} | "
             f"{s['rms_over_noise_after_mean']:.3f}, "
             f"{s['rms_over_noise_after_max']:.3f} | {s['fuel_z_rms_after']:.2f} | {s['wall_time_s_mean']:.1f} |"
@@ -209,6 +263,15 @@ def matrix_markdown(summary: list[dict[str, Any]]) -> str:
             continue
         lines += ["", f"**{axis}**", "", f"| hidden effect | {' | '.join(labels)} |", "|---" * (len(labels) + 1) + "|"]
         lines += [f"| {e} | {' | '.join(_fraction_cell(entries.get((e, axis, v))) for v in labels)} |" for e in rows]
+    short = short_of_targets(summary)
+    lines += [
+        "",
+        f"**Cells short of a target** ({len(short)}; targets: named right on {100 * TARGET_NAMED:.0f} % of the "
+        f"eligible logs, clean logs `none` on {100 * TARGET_CLEAN:.0f} %, after naming the residual at most "
+        f"{TARGET_RESIDUAL:g} x noise and the fuel z RMS at most {TARGET_FUEL_Z:g})",
+        "",
+    ]
+    lines += [f"* {line}" for line in short] or ["none"]
     return "\n".join(lines) + "\n"
 
 
