@@ -46,7 +46,7 @@ from typing import Any, Protocol
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from estimators.attitude_integration import fourth_order_increments, midpoint_log
+from estimators.attitude_integration import fourth_order_increments, midpoint_log, midpoint_step_map, relative_attitudes
 from estimators.attitude_noise import AttitudeNoise, fit_attitude_noise
 from estimators.problem import IdentificationModel
 from spaceid_gym.arrays import FloatArray
@@ -210,17 +210,13 @@ class AttitudeChannel:
     """
 
     def __init__(self, problem: BaseRateProblem, log: MeasurementLog, coupling: GyroCoupling | None = None) -> None:
-        quat = log.quat_base_to_inertial_wxyz
-        if quat is None:
-            raise SpaceIdInputError("attitude channel: the log has no attitude quaternions (no star tracker)")
-        rot = Rotation.from_quat(np.asarray(quat, dtype=float), scalar_first=True).as_matrix()
-        relative = np.einsum("ji,tjk->tik", rot[0], rot)  # A_k = R_0^T R_k
+        relative = relative_attitudes(log)  # A_k = R_0^T R_k
         steps = np.einsum("tij,tkj->tik", relative[1:], relative[:-1])  # A_j A_{j-1}^T
         increments = Rotation.from_matrix(steps).as_rotvec()
         self.problem = problem
         self.measured = np.concatenate((np.zeros((1, 3)), np.cumsum(increments, axis=0)))
         #: ``(A_{j-1} + A_j) / 2 * dt_j`` (T-1, 3, 3): maps the step's midpoint rate to its rotation increment
-        self._step_map = 0.5 * (relative[:-1] + relative[1:]) * np.diff(np.asarray(log.t_s, dtype=float))[:, None, None]
+        self._step_map = midpoint_step_map(relative, log.t_s)
         self.coupling = coupling
         self._dt_s = np.diff(np.asarray(log.t_s, dtype=float))
         #: the star tracker's increments, less (after :meth:`set_reference`) the midpoint rule's own error

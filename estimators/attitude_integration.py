@@ -59,6 +59,23 @@ def _resampled(
     )
 
 
+def relative_attitudes(log: MeasurementLog) -> FloatArray:
+    """``A_k = R_0^T R_k`` (T, 3, 3): the base's attitude at each sample in the axes of the base at the first (``R``
+    base to inertial, from the log's quaternions)."""
+    quat = log.quat_base_to_inertial_wxyz
+    if quat is None:
+        raise SpaceIdInputError("attitude channel: the log has no attitude quaternions (no star tracker)")
+    rot = Rotation.from_quat(np.asarray(quat, dtype=float), scalar_first=True).as_matrix()
+    return np.einsum("ji,tjk->tik", rot[0], rot)
+
+
+def midpoint_step_map(relative: FloatArray, t_s: FloatArray) -> FloatArray:
+    """``(A_{j-1} + A_j) / 2 * dt_j`` (T-1, 3, 3) of :func:`relative_attitudes` ``relative`` (T, 3, 3) and the sample
+    times ``t_s`` (T,), s: maps a step's midpoint base rate (body axes) to its rotation increment (first sample's axes),
+    the midpoint rule."""
+    return 0.5 * (relative[:-1] + relative[1:]) * np.diff(np.asarray(t_s, dtype=float))[:, None, None]
+
+
 def midpoint_log(log: MeasurementLog) -> MeasurementLog:
     """The log's steps as samples: sample 0 as logged, then sample ``j`` (1..T-1) at the midpoint of step ``j``.
 
