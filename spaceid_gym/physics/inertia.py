@@ -50,9 +50,10 @@ def skew(v: FloatArray) -> FloatArray:
 
 
 def point_mass_inertia(r_m: FloatArray) -> FloatArray:
-    """``S(r) = |r|^2 E - r r^T``: the inertia (per kg) of a point at ``r`` about the origin."""
+    """``S(r) = |r|^2 E - r r^T``: the inertia (per kg) of a point at ``r`` about the origin; ``r_m`` (..., 3) gives
+    (..., 3, 3)."""
     r = np.asarray(r_m, dtype=float)
-    return np.dot(r, r) * np.eye(3) - np.outer(r, r)
+    return np.einsum("...i,...i->...", r, r)[..., None, None] * np.eye(3) - r[..., :, None] * r[..., None, :]
 
 
 @dataclass(frozen=True)
