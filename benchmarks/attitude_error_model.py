@@ -7,11 +7,11 @@ For clean logs of the variation matrix (``--attitudes``, each axis else drawn fr
 * ``stationary``: the error model the diagnosis uses (:class:`~estimators.attitude_noise.AttitudeNoise`, white error
   plus wander per noise axis, fitted by maximum likelihood: 9 numbers);
 * ``propagated``: the encoders' noise carried through the momentum map step by step, a block-tridiagonal covariance
-  that changes with the configuration, plus the attitude source's white error: two numbers (the encoder and the
-  white std), fitted by maximum likelihood (the scale in closed form, their ratio by a bounded search).
+  that changes with the configuration, plus the attitude source's white error and a wander: four numbers
+  (:class:`~estimators.attitude_propagation.PropagatedNoise`), fitted by maximum likelihood.
 
 Printed per log: ``-2 log L`` of the propagated model less the stationary one's on the same 3(T-2) values (negative:
-the propagated model describes the residual better, by that many units of likelihood ratio, with 7 numbers fewer),
+the propagated model describes the residual better, by that many units of likelihood ratio, with 5 numbers fewer),
 the fitted encoder std over the simulated one, the whitened residual's variance over 5 s windows (min-max; 1 under a
 right model, the sampling spread of 5 s windows aside), and the fuel mass's Cramér-Rao std from both channels under
 each model (gyro at its white noise). Usage::
@@ -25,10 +25,15 @@ import argparse
 import math
 
 import numpy as np
-from scipy.optimize import minimize_scalar
 
 from estimators.attitude_channel import AttitudeChannel
-from estimators.attitude_propagation import EncoderPropagation, encoder_propagation, whiten_block_tridiagonal
+from estimators.attitude_propagation import (
+    EncoderPropagation,
+    encoder_propagation,
+    fit_propagated_noise,
+    propagated_log_likelihood,
+    whiten_propagated,
+)
 from estimators.diagnostics.workflow import true_parameters
 from estimators.problem import IdentificationModel
 from spaceid_gym.arrays import FloatArray
@@ -39,21 +44,11 @@ WINDOW_S = 5.0
 
 
 def propagated_fit(d: FloatArray, propagation: EncoderPropagation) -> tuple[float, float, float, FloatArray]:
-    """Maximum likelihood of the encoder std and the white std (rad) on steps ``d`` (m, 3): ``(-2 log L up to the
-    constant, encoder std, white std, whitened (m, 3))``."""
-    unit_e, unit_b = propagation.covariance(1.0)
-    white_d, white_b = propagation.covariance(0.0, 1.0)
-    n = d.size
-
-    def profile(log_ratio: float) -> tuple[float, float, FloatArray]:
-        ratio = 10.0**log_ratio
-        w, log_det = whiten_block_tridiagonal(d, unit_e + ratio * white_d, unit_b + ratio * white_b)
-        scale = float(np.sum(w * w)) / n
-        return n * math.log(scale) + log_det + n, scale, w / math.sqrt(scale)
-
-    best = minimize_scalar(lambda x: profile(x)[0], bounds=(-14.0, 6.0), method="bounded", options={"xatol": 1e-3})
-    value, scale, whitened = profile(float(best.x))
-    return value, math.sqrt(scale), math.sqrt(scale * 10.0**best.x), whitened
+    """The propagated error model fitted to steps ``d`` (m, 3): ``(-2 log L up to the constant, encoder std, white std,
+    whitened (m, 3))``."""
+    noise = fit_propagated_noise(d, propagation)
+    whitened, _ = whiten_propagated(d, propagation, noise)
+    return propagated_log_likelihood(d, propagation, noise), noise.encoder_std_rad, noise.white_std_rad, whitened
 
 
 def window_range(whitened: FloatArray, samples: int) -> tuple[float, float]:
@@ -94,14 +89,12 @@ def main() -> None:
             stationary = channel.residuals(theta, noise).reshape(-1, 3)
             stationary_value = float(np.sum(stationary**2)) + noise.log_det(len(d))
             propagation = encoder_propagation(model, log, theta)
-            tail = EncoderPropagation(propagation.previous[1:], propagation.current[1:])  # the same values: d_2 ... d_{T-1}
-            value, encoder_std, white_std, whitened = propagated_fit(d[1:], tail)
+            value, encoder_std, _, whitened = propagated_fit(d, propagation)
             samples = round(WINDOW_S / float(np.mean(np.diff(log.t_s))))
             gyro_std = env.sensors.gyro_std_rad_s(env.control_period_s)
             gyro = model.problem(log).fisher(theta, gyro_std)
-            jac = channel.difference_jacobian(theta)[1:]
-            diagonal, below = tail.covariance(encoder_std, white_std)
-            prop_jac, _ = whiten_block_tridiagonal(jac, diagonal, below)
+            jac = channel.difference_jacobian(theta)
+            prop_jac, _ = whiten_propagated(jac, propagation, fit_propagated_noise(d, propagation))
             prop_info = prop_jac.reshape(-1, jac.shape[2])
             ratio = mass_std(gyro + channel.fisher(theta, noise)) / mass_std(gyro + prop_info.T @ prop_info)
             low, high = window_range(stationary, samples)

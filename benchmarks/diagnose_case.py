@@ -64,17 +64,16 @@ def held_noise_gains(model: IdentificationModel, log: MeasurementLog, d: Diagnos
     base_channel = AttitudeChannel.of(model, log, weights.coupling, weights.reference)
     assert base_channel is not None
     base = base_channel.chi2(d.baseline.theta, weights.attitude)
-    lines = [f"  the baseline's walk std {' '.join(f'{v:.2g}' for v in weights.attitude.walk_std_rad)} rad"]
+    lines = [f"  the baseline's error model: {weights.attitude}"]
     for c in sorted(d.candidates, key=lambda f: -f.lr_statistic):
         extended = candidate_model(model, c.spec)
         channel = AttitudeChannel.of(extended, log, weights.coupling, weights.reference)
         held = fit_model(extended, log, starts=[c.theta], effect=c.effect, weights=weights, channel=channel)[0]
         assert channel is not None
         profiled = (d.baseline.attitude_chi2 or 0.0) - (c.attitude_chi2 or 0.0)
-        walk = "-" if c.attitude_noise is None else " ".join(f"{v:.2g}" for v in c.attitude_noise.walk_std_rad)
         lines.append(
             f"  {c.effect:17s} attitude gain held {base - channel.chi2(held.theta, weights.attitude):8.1f}  "
-            f"profiled {profiled:8.1f}  (its walk std {walk} rad)"
+            f"profiled {profiled:8.1f}  (its error model: {c.attitude_noise})"
         )
     return lines
 

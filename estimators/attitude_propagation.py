@@ -15,23 +15,32 @@ joint rates. The steps' covariance is block-tridiagonal:
 
 It changes with the arm's configuration, and at each sample it is nearly flat: the momentum map carries the joints'
 noise into two directions of rotation far more than the third, and those directions turn as the arm moves. On a
-noise-free attitude this is the whole residual (the midpoint rule's own error is taken out); a star tracker adds its
-white error, ``s^2 (2 I)`` and ``-s^2 I`` on the two bands (:meth:`EncoderPropagation.covariance`).
+noise-free attitude this is the whole residual but for the model's own small wander (the midpoint rule's error is
+taken out to first order, and a simulator's integrator has its own, ~1e-8 rad over a minute): at this precision that
+wander shows, and a model without it named a momentum on clean logs.
+
+:class:`PropagatedNoise` adds to it the attitude source's white error and that wander, as the stationary model
+(:class:`~estimators.attitude_noise.AttitudeNoise`) has them but the same on every axis: the steps are filtered,
+``u_k = d_k - phi d_{k-1}``, and their covariance is then banded, two blocks of three below the diagonal
+(:meth:`EncoderPropagation.covariance`); :func:`whiten_propagated` whitens with its banded Cholesky factor and gives
+its log-determinant, :func:`fit_propagated_noise` fits the four numbers by maximum likelihood.
 
 The derivatives are taken where the base rate is computed, on the channel's midpoint samples: ``W`` by a forward
 difference of each joint's angle over every sample at once (the base rate of a sample depends on that sample's joint
 state alone in a model without state-carrying effects, which is checked), ``V`` likewise, where the base rate is
-linear. :func:`whiten_block_tridiagonal` whitens a residual under such a covariance (a banded Cholesky factor, five
-sub-diagonals), with its log-determinant.
+linear.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.linalg import cholesky_banded, solve_banded
+from scipy.optimize import minimize
 
 from estimators.attitude_integration import midpoint_log, midpoint_step_map, relative_attitudes
 from estimators.problem import IdentificationModel
@@ -45,31 +54,92 @@ ANGLE_STEP_RAD, RATE_STEP_RAD_S = 1e-6, 1e-3
 
 
 @dataclass(frozen=True)
+class PropagatedNoise:
+    """The attitude residual's error model built from the encoders' noise propagated step by step
+    (:class:`EncoderPropagation`), the attitude source's white error and the model's own wander, the last two as in
+    :class:`~estimators.attitude_noise.AttitudeNoise` but the same on every axis.
+
+    Attributes:
+        encoder_std_rad: the encoders' white noise per joint, rad.
+        white_std_rad: the attitude source's white error per axis, rad (a star tracker's; 0 for an exact attitude).
+        walk_std_rad: the std of the innovation of the wander's steps per axis, rad: what the model's prediction loses
+            beyond the encoders (the channel's integration error left, another simulator's integrator).
+        walk_correlation: ``phi`` in ``[0, 1)``, the correlation of the wander's successive steps (0: a random walk;
+            near 1: a smooth wander).
+    """
+
+    encoder_std_rad: float
+    white_std_rad: float = 0.0
+    walk_std_rad: float = 0.0
+    walk_correlation: float = 0.0
+
+    def __post_init__(self) -> None:
+        for label in ("encoder_std_rad", "white_std_rad", "walk_std_rad", "walk_correlation"):
+            value = getattr(self, label)
+            if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0.0):
+                raise SpaceIdInputError(f"propagated attitude noise: {label} expected a finite number >= 0, got {value!r}")
+        if self.walk_correlation >= 1.0:
+            raise SpaceIdInputError(
+                f"propagated attitude noise: walk_correlation expected in [0, 1), got {self.walk_correlation!r}"
+            )
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able, with ``attitude_error_model``: ``"propagated"``."""
+        return {"attitude_error_model": "propagated"} | {
+            label: getattr(self, label) for label in ("encoder_std_rad", "white_std_rad", "walk_std_rad", "walk_correlation")
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> PropagatedNoise:
+        """The inverse of :meth:`to_dict`."""
+        return cls(*(float(data[k]) for k in ("encoder_std_rad", "white_std_rad", "walk_std_rad", "walk_correlation")))
+
+
 class EncoderPropagation:
     """How each encoder sample's error moves the attitude residual's steps (see the module docstring).
 
-    Attributes:
-        previous: ``P`` (T-1, 3, n): step ``k``'s rotation (first sample's axes, rad) per rad of the encoders at sample
-            ``k - 1`` (the array's row ``k - 1`` is step ``k``).
-        current: ``C`` (T-1, 3, n): the same per rad of the encoders at sample ``k``.
+    Args:
+        previous: ``P`` (m, 3, n): step ``k``'s rotation (rad) per rad of the encoders at sample ``k - 1``.
+        current: ``C`` (m, 3, n): the same per rad of the encoders at sample ``k``.
+
+    Rows are the log's steps in order; axes those of the channel's first sample unless :meth:`in_axes` turned them.
     """
 
-    previous: FloatArray
-    current: FloatArray
-
-    def covariance(self, encoder_std_rad: float, white_std_rad: float = 0.0) -> tuple[FloatArray, FloatArray]:
-        """The steps' covariance (rad^2) for encoder noise ``encoder_std_rad`` per joint and an attitude source's white
-        error ``white_std_rad`` per axis: the diagonal blocks ``Cov(d_k)`` (T-1, 3, 3) and the blocks below them
-        ``Cov(d_k, d_{k-1})`` (T-2, 3, 3), step 1 first."""
-        if not (np.isfinite(encoder_std_rad) and encoder_std_rad >= 0.0 and np.isfinite(white_std_rad) and white_std_rad >= 0.0):
+    def __init__(self, previous: FloatArray, current: FloatArray) -> None:
+        self.previous = np.asarray(previous, dtype=float)
+        self.current = np.asarray(current, dtype=float)
+        if self.previous.shape != self.current.shape or self.previous.ndim != 3 or self.previous.shape[1] != 3:
             raise SpaceIdInputError(
-                f"encoder propagation: expected noise stds >= 0, got encoder {encoder_std_rad!r}, white {white_std_rad!r}"
+                f"encoder propagation: expected two (m, 3, n) arrays, got {self.previous.shape} and {self.current.shape}"
             )
         p, c = self.previous, self.current
-        e2, w2 = encoder_std_rad**2, white_std_rad**2
-        diagonal = e2 * (np.einsum("kin,kjn->kij", p, p) + np.einsum("kin,kjn->kij", c, c)) + 2.0 * w2 * np.eye(3)
-        below = e2 * np.einsum("kin,kjn->kij", p[1:], c[:-1]) - w2 * np.eye(3)
-        return diagonal, below
+        #: the blocks of the covariance per unit encoder variance: ``P_k P_k^T + C_k C_k^T`` and ``P_k C_{k-1}^T``
+        self.unit_diagonal = np.einsum("kin,kjn->kij", p, p) + np.einsum("kin,kjn->kij", c, c)
+        self.unit_below = np.einsum("kin,kjn->kij", p[1:], c[:-1])
+
+    def __len__(self) -> int:
+        return len(self.previous)
+
+    def in_axes(self, axes: FloatArray) -> EncoderPropagation:
+        """The same in the axes ``axes`` (3, 3), columns in the current axes."""
+        return EncoderPropagation(np.einsum("ia,kin->kan", axes, self.previous), np.einsum("ia,kin->kan", axes, self.current))
+
+    def covariance(self, noise: PropagatedNoise) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """The covariance (rad^2) under ``noise`` of the filtered steps ``u_k = d_k - phi d_{k-1}`` (``k >= 1``;
+        :func:`whiten_propagated`): its blocks at lags 0, 1 and 2, (m-1, 3, 3), (m-2, 3, 3) and (m-3, 3, 3), ``u_1``
+        first. With ``D_k = P_k P_k^T + C_k C_k^T`` and ``X_k = P_k C_{k-1}^T`` (per unit encoder variance), the encoders
+        give ``D_k + phi^2 D_{k-1} - phi (X_k + X_k^T)``, ``X_k - phi D_{k-1} + phi^2 X_{k-1}`` and ``-phi X_{k-1}``; the
+        white error and the wander add what they add in :class:`~estimators.attitude_noise.AttitudeNoise`."""
+        if len(self) < 4:
+            raise SpaceIdInputError(f"encoder propagation: expected at least 4 steps, got {len(self)}")
+        e2, s2, w2, phi = noise.encoder_std_rad**2, noise.white_std_rad**2, noise.walk_std_rad**2, noise.walk_correlation
+        d, x = self.unit_diagonal, self.unit_below  # x[k - 1] = X_k
+        eye = np.eye(3)
+        lag0 = e2 * (d[1:] + phi * phi * d[:-1] - phi * (x + np.swapaxes(x, 1, 2)))
+        lag0 += (s2 * (1.0 + (1.0 + phi) ** 2 + phi * phi) + w2) * eye
+        lag1 = e2 * (x[1:] - phi * d[1:-1] + phi * phi * x[:-1]) - s2 * (1.0 + phi) ** 2 * eye
+        lag2 = -e2 * phi * x[1:-1] + s2 * phi * eye
+        return lag0, lag1, lag2
 
 
 def encoder_propagation(model: IdentificationModel, log: MeasurementLog, theta: FloatArray) -> EncoderPropagation:
@@ -116,31 +186,120 @@ def _check_pointwise(model: IdentificationModel, mid: MeasurementLog, theta: Flo
         )
 
 
-def whiten_block_tridiagonal(values: FloatArray, diagonal: FloatArray, below: FloatArray) -> tuple[FloatArray, float]:
-    """``values`` (m, 3) or (m, 3, k) whitened under the block-tridiagonal covariance of ``diagonal`` (m, 3, 3) and
-    ``below`` (m-1, 3, 3) (:meth:`EncoderPropagation.covariance`): ``L^-1 values`` with ``L`` its lower Cholesky
-    factor, rows in time then axis order, and ``log det`` of the covariance.
+#: the lower bandwidth of the filtered steps' covariance, scalars in time then axis order (two blocks of three, less one)
+BANDWIDTH = 8
+
+
+def whiten_block_banded(values: FloatArray, blocks: tuple[FloatArray, FloatArray, FloatArray]) -> tuple[FloatArray, float]:
+    """``values`` (m, 3) or (m, 3, k) whitened under the covariance of ``blocks`` (its blocks at lags 0, 1 and 2:
+    (m, 3, 3), (m-1, 3, 3), (m-2, 3, 3), :meth:`EncoderPropagation.covariance`): ``L^-1 values`` with ``L`` its lower
+    Cholesky factor (rows in time, then axis order), and ``log det`` of the covariance.
 
     Raises:
         SpaceIdInputError: shapes that do not match, or a covariance that is not positive definite."""
-    m = diagonal.shape[0]
-    if diagonal.shape != (m, 3, 3) or below.shape != (m - 1, 3, 3) or values.shape[:2] != (m, 3):
+    factor, log_det = band_factor(blocks)
+    m = blocks[0].shape[0]
+    if values.shape[:2] != (m, 3):
+        raise SpaceIdInputError(f"whiten: expected values ({m}, 3[, k]), got {values.shape}")
+    flat = np.asarray(values, dtype=float).reshape(3 * m, -1)
+    return solve_banded((BANDWIDTH, 0), factor, flat, check_finite=False).reshape(values.shape), log_det
+
+
+def band_factor(blocks: tuple[FloatArray, FloatArray, FloatArray]) -> tuple[FloatArray, float]:
+    """The lower Cholesky factor of the covariance of ``blocks`` (:func:`whiten_block_banded`) in LAPACK's lower band
+    storage (BANDWIDTH + 1, 3m), and the covariance's ``log det``.
+
+    Raises:
+        SpaceIdInputError: shapes that do not match, or a covariance that is not positive definite."""
+    lag0, lag1, lag2 = blocks
+    m = lag0.shape[0]
+    if lag0.shape != (m, 3, 3) or lag1.shape != (max(m - 1, 0), 3, 3) or lag2.shape != (max(m - 2, 0), 3, 3):
         raise SpaceIdInputError(
-            f"whiten: expected values (m, 3[, k]), blocks (m, 3, 3) and (m-1, 3, 3); got {values.shape}, "
-            f"{diagonal.shape}, {below.shape}"
+            f"whiten: expected blocks (m, 3, 3), (m-1, 3, 3), (m-2, 3, 3); got {lag0.shape}, {lag1.shape}, {lag2.shape}"
         )
-    n = 3 * m
-    band = np.zeros((6, n))  # LAPACK lower band storage: band[r, j] = Cov[j + r, j]
+    band = np.zeros((BANDWIDTH + 1, 3 * m))  # band[r, j] = Cov[j + r, j]
     columns = 3 * np.arange(m)
     for a in range(3):
-        for b in range(a + 1):
-            band[a - b, columns + b] = diagonal[:, a, b]
         for b in range(3):
-            band[3 + a - b, columns[:-1] + b] = below[:, a, b]
+            if a >= b:
+                band[a - b, columns + b] = lag0[:, a, b]
+            band[3 + a - b, columns[: m - 1] + b] = lag1[:, a, b]
+            band[6 + a - b, columns[: m - 2] + b] = lag2[:, a, b]
     try:
         factor = cholesky_banded(band, lower=True, check_finite=False)
     except np.linalg.LinAlgError:
         raise SpaceIdInputError("whiten: the covariance is not positive definite") from None
-    flat = values.reshape(n, -1)
-    whitened = solve_banded((5, 0), factor, flat, check_finite=False)
-    return whitened.reshape(values.shape), float(2.0 * np.sum(np.log(factor[0])))
+    return factor, float(2.0 * np.sum(np.log(factor[0])))
+
+
+def filtered(differences: FloatArray, phi: float) -> FloatArray:
+    """``u_k = d_k - phi d_{k-1}`` (m-1, 3[, k]) of steps ``differences`` (m, 3[, k])."""
+    return differences[1:] - phi * differences[:-1]
+
+
+def whiten_propagated(
+    differences: FloatArray, propagation: EncoderPropagation, noise: PropagatedNoise
+) -> tuple[FloatArray, float]:
+    """Steps ``differences`` (m, 3[, k]), the axes of ``propagation``, whitened under ``noise``: (m-1, 3[, k]), unit
+    variance and independent under it, and the ``log det`` of their covariance."""
+    return whiten_block_banded(filtered(differences, noise.walk_correlation), propagation.covariance(noise))
+
+
+def propagated_log_likelihood(differences: FloatArray, propagation: EncoderPropagation, noise: PropagatedNoise) -> float:
+    """``-2 log L`` (without the constant ``n log 2 pi``) of steps ``differences`` (m, 3) under ``noise``."""
+    whitened, log_det = whiten_propagated(differences, propagation, noise)
+    return float(np.sum(whitened * whitened)) + log_det
+
+
+#: the range of the base-10 logarithms of the white error's and the wander's variances relative to the encoders' that
+#: :func:`fit_propagated_noise` explores, and the largest wander correlation
+LOG_RATIO_RANGE, MAX_CORRELATION = (-12.0, 8.0), 0.999
+
+
+def fit_propagated_noise(
+    differences: FloatArray, propagation: EncoderPropagation, start: PropagatedNoise | None = None, only_from_start: bool = False
+) -> PropagatedNoise:
+    """Maximum-likelihood :class:`PropagatedNoise` of steps ``differences`` (m, 3), rad, as ``propagation`` carries the
+    encoders' noise into them: the overall scale in closed form; the white error's and the wander's variances relative
+    to the encoders' (their logarithms, within :data:`LOG_RATIO_RANGE`) and the wander's correlation (its logit) by
+    Nelder-Mead, from a small white error and wander at correlations 0.05 and 0.9 and from ``start`` (the only start with
+    ``only_from_start``).
+
+    Raises:
+        SpaceIdInputError: ``differences`` not (len(propagation), 3), or ``only_from_start`` without a ``start``."""
+    d = np.asarray(differences, dtype=float)
+    if d.shape != (len(propagation), 3):
+        raise SpaceIdInputError(f"propagated attitude noise: expected differences ({len(propagation)}, 3), got {d.shape}")
+    if only_from_start and start is None:
+        raise SpaceIdInputError("propagated attitude noise: only_from_start needs a start")
+    n = 3 * (len(d) - 1)
+    low, high = LOG_RATIO_RANGE
+
+    def profile(x: FloatArray) -> tuple[float, PropagatedNoise]:
+        white, walk = (10.0 ** min(max(float(v), low), high) for v in x[:2])
+        phi = MAX_CORRELATION / (1.0 + math.exp(-min(max(float(x[2]), -50.0), 50.0)))
+        unit = PropagatedNoise(1.0, math.sqrt(white), math.sqrt(walk), phi)
+        whitened, log_det = whiten_propagated(d, propagation, unit)
+        scale = max(float(np.sum(whitened * whitened)) / n, 1e-300)
+        noise = PropagatedNoise(math.sqrt(scale), math.sqrt(scale * white), math.sqrt(scale * walk), phi)
+        return n * math.log(scale) + log_det + n, noise
+
+    def logit(phi: float) -> float:
+        phi = min(max(phi, 1e-6), MAX_CORRELATION * (1.0 - 1e-9))
+        return math.log(phi / (MAX_CORRELATION - phi))
+
+    starts = [] if only_from_start else [np.array([-6.0, -6.0, logit(phi)]) for phi in (0.05, 0.9)]
+    if start is not None:
+        if start.encoder_std_rad <= 0.0:
+            raise SpaceIdInputError("propagated attitude noise: the start has no encoder noise")
+        e2 = start.encoder_std_rad**2
+        ratios = np.log10(np.maximum([start.white_std_rad**2 / e2, start.walk_std_rad**2 / e2], 10.0**low))
+        starts.append(np.append(ratios, logit(start.walk_correlation)))
+    best: tuple[float, PropagatedNoise] | None = None
+    for x0 in starts:
+        found = minimize(lambda x: profile(x)[0], x0, method="Nelder-Mead", options={"xatol": 1e-3, "fatol": 1e-3})
+        candidate = profile(found.x)
+        if best is None or candidate[0] < best[0]:
+            best = candidate
+    assert best is not None
+    return best[1]

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
+from estimators.attitude_propagation import PropagatedNoise
 from estimators.diagnostics.diagnose import CLEAN_LOG_FAMILIES, NO_MISSING_EFFECT, ModelFit, diagnose
 from estimators.diagnostics.power import N_TESTS
 from estimators.diagnostics.verdict import held_likelihood_ratio
@@ -69,20 +70,20 @@ def test_the_held_likelihood_ratio_holds_the_baselines_error_model() -> None:
 
 def test_a_candidates_refitted_error_model_names_no_effect_on_a_clean_exact_log() -> None:
     """Clean log 9821 (``quick3``, 20 Hz, noise-free attitude, noise x1.49; held out when it was named a payload): the
-    payload's fit took the attitude error model's wander to zero and gained 30.9 in the profile likelihood ratio, all
-    of it in the attitude channel, at p below the candidates' level. Tested with the baseline's error model held,
-    the payload gains what the data hold and the verdict is ``none``."""
+    payload's fit took the stationary error model's wander to zero and gained 30.9 in the profile likelihood ratio,
+    all of it in the attitude channel, at p below the candidates' level. Tested with the baseline's error model held,
+    the payload gains what the data hold and the verdict is ``none``. The channel now describes this log with the
+    encoders' noise propagated (and a wander), and the refit still moves: the momentum's profile ratio is 49.7, its
+    held one 2.2. (Without the wander in the propagated model, its held ratio was 54.3 and a momentum was named.)"""
     env = simulate_variation(draw_variation("none", 9821), 60.0)
     d = diagnose(IdentificationModel(env.robot, "fuel"), env.measurement_log())
     assert d.verdict == NO_MISSING_EFFECT, d.reason
-    payload = d.fit_of("payload")
-    assert payload is not None and d.weights is not None
-    k = payload.n_params - d.baseline.n_params
-    # the profile ratio (30.9, p = 0.00061 against the candidates' 0.000625 then) took the wander to zero
-    assert payload.attitude_noise is not None and max(payload.attitude_noise.walk_std_rad) < 1e-10
-    assert payload.lr_statistic - payload.held_lr_statistic > 8.0
-    assert payload.p_value == pytest.approx(chi2.sf(payload.held_lr_statistic, k))
-    assert payload.p_value > 10 * d.alpha / N_TESTS and not payload.significant
+    assert d.weights is not None and isinstance(d.weights.attitude, PropagatedNoise)
+    assert max(c.lr_statistic - c.held_lr_statistic for c in d.candidates) > 8.0
+    for c in d.candidates:
+        k = c.n_params - d.baseline.n_params
+        assert c.p_value == pytest.approx(chi2.sf(c.held_lr_statistic, k))
+        assert not c.significant
 
 
 @pytest.mark.parametrize("seed", [10229, 10239])
@@ -96,7 +97,8 @@ def test_a_baseline_left_in_another_basin_is_refitted_from_a_candidates_fit(seed
     model = IdentificationModel(env.robot, "fuel")
     d = diagnose(model, env.measurement_log())
     assert d.verdict == NO_MISSING_EFFECT, d.reason
-    assert d.reason.startswith("the baseline was refitted from the") and d.baseline_restarted_from is not None, d.reason
+    if seed == 10239:  # 10229's two-channel baseline reaches the true basin itself under the propagated error model
+        assert d.reason.startswith("the baseline was refitted from the") and d.baseline_restarted_from is not None, d.reason
     truth = true_parameters(model, truth_of(env))
     assert truth is not None
     assert np.max(np.abs(d.baseline.theta[1:] - truth[1:])) < 0.01  # the tank within 1 cm, 0.77 m off before

@@ -402,7 +402,7 @@ def test_the_profile_chi_square_is_minus_two_log_likelihood_with_a_dense_covaria
     channel = AttitudeChannel.of(model, log, reference=theta)
     assert theta is not None and channel is not None
     differences = channel.differences(theta) @ channel.axes  # whitened in the noise axes, as the channel does
-    fitted = channel.estimate_noise(theta)
+    fitted = fit_attitude_noise(differences)  # the stationary model (the channel prefers the propagated one here)
     other = AttitudeNoise(tuple(3.0 * np.asarray(fitted.white_std_rad)), (2e-7, 1e-7, 3e-7), (0.0, 0.5, 0.9))
     for noise in (fitted, other):
         assert noise.log_det(len(differences)) + channel.chi2(theta, noise) == pytest.approx(

@@ -15,8 +15,13 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.stats import chi2, norm
 
-from estimators.attitude_channel import AttitudeChannel, GyroCoupling, estimate_gyro_coupling, min_coupling_samples
-from estimators.attitude_noise import AttitudeNoise
+from estimators.attitude_channel import (
+    AttitudeChannel,
+    ErrorModel,
+    GyroCoupling,
+    estimate_gyro_coupling,
+    min_coupling_samples,
+)
 from estimators.base import Estimator
 from estimators.estimate import Estimate
 from estimators.least_squares import LevenbergMarquardt
@@ -78,10 +83,10 @@ class CandidateScores:
 @dataclass(frozen=True)
 class ChannelWeights:
     """The noise of the two channels, which weights them in a joint fit: the gyro's per-sample std (rad/s, per
-    axis) and the attitude residual's error model (:class:`~estimators.attitude_channel.AttitudeNoise`)."""
+    axis) and the attitude residual's error model (:data:`~estimators.attitude_channel.ErrorModel`)."""
 
     gyro_std_rad_s: float
-    attitude: AttitudeNoise
+    attitude: ErrorModel
     coupling: GyroCoupling | None = None  # the attitude's response to the gyro (a fused attitude), or None
     #: the unknowns at which the channel takes its integration error out and finds its noise axes (the baseline's fit;
     #: :meth:`~estimators.attitude_channel.AttitudeChannel.of`), or None (the nominal)
@@ -145,7 +150,7 @@ class ModelFit(CandidateScores):
     chi2: float = math.nan  # filled in by :func:`diagnose` once every model is fitted
     residual_consistent: bool | None = None  # filled in by :func:`diagnose` for the significant and plausible ones
     attitude_white_p: float = math.nan  # the whitened attitude residual's low-frequency test (:func:`low_frequency_p_value`)
-    attitude_noise: AttitudeNoise | None = None  # the attitude error model refitted at this fit
+    attitude_noise: ErrorModel | None = None  # the attitude error model refitted at this fit
     attitude_chi2_held: float | None = None  # the attitude chi-square under the weights' error model, held
 
     @property

@@ -15,8 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from estimators.attitude_channel import AttitudeChannel, GyroCoupling
-from estimators.attitude_noise import AttitudeNoise
+from estimators.attitude_channel import AttitudeChannel, GyroCoupling, noise_from_dict
 from estimators.base import Estimator
 from estimators.diagnostics.compare import Comparison, compare
 from estimators.diagnostics.diagnose import Diagnosis, candidate_model, diagnose
@@ -169,7 +168,7 @@ def parameter_errors(
             None if reference is None else np.asarray(reference, dtype=float),
         )
     )
-    extra_information = None if channel is None else channel.fisher(theta_true, AttitudeNoise.from_dict(attitude_noise))
+    extra_information = None if channel is None else channel.fisher(theta_true, noise_from_dict(attitude_noise))
     std = model.problem(log).crlb_std(theta_true, estimate.noise_std_rad_s, extra_information)
     return ParameterErrors(FUEL_PARAMETER_NAMES, estimate.theta[index] - theta_true[index], std[index], estimate.theta_std[index])
 
