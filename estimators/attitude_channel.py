@@ -51,13 +51,11 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
-from scipy.linalg import solve_banded
 from scipy.spatial.transform import Rotation
 
 from estimators.attitude_integration import fourth_order_increments, midpoint_log, midpoint_step_map, relative_attitudes
 from estimators.attitude_noise import AttitudeNoise, fit_attitude_noise
 from estimators.attitude_propagation import (
-    BANDWIDTH,
     EncoderPropagation,
     PropagatedNoise,
     band_factor,
@@ -65,6 +63,7 @@ from estimators.attitude_propagation import (
     filtered,
     fit_propagated_noise,
     propagated_log_likelihood,
+    solve_with_factor,
 )
 from estimators.problem import IdentificationModel
 from spaceid_gym.arrays import FloatArray
@@ -483,11 +482,7 @@ class AttitudeChannel:
     def _whiten(self, differences: FloatArray, noise: ErrorModel) -> FloatArray:
         """Differences in the noise axes (T-1, 3[, k]) whitened under ``noise``: (T-2, 3[, k])."""
         if isinstance(noise, PropagatedNoise):
-            factor = self._factor(noise)[0]
-            values = filtered(differences, noise.walk_correlation)
-            return solve_banded((BANDWIDTH, 0), factor, values.reshape(len(values) * 3, -1), check_finite=False).reshape(
-                values.shape
-            )
+            return solve_with_factor(self._factor(noise)[0], filtered(differences, noise.walk_correlation))
         return noise.whiten(differences, self._factors(noise))
 
     def _log_det(self, noise: ErrorModel) -> float:

@@ -39,7 +39,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.linalg import cholesky_banded, solve_banded
+from numba import njit
 from scipy.optimize import minimize
 
 from estimators.attitude_integration import midpoint_log, midpoint_step_map, relative_attitudes
@@ -198,38 +198,84 @@ def whiten_block_banded(values: FloatArray, blocks: tuple[FloatArray, FloatArray
     Raises:
         SpaceIdInputError: shapes that do not match, or a covariance that is not positive definite."""
     factor, log_det = band_factor(blocks)
-    m = blocks[0].shape[0]
-    if values.shape[:2] != (m, 3):
-        raise SpaceIdInputError(f"whiten: expected values ({m}, 3[, k]), got {values.shape}")
-    flat = np.asarray(values, dtype=float).reshape(3 * m, -1)
-    return solve_banded((BANDWIDTH, 0), factor, flat, check_finite=False).reshape(values.shape), log_det
+    return solve_with_factor(factor, values), log_det
 
 
 def band_factor(blocks: tuple[FloatArray, FloatArray, FloatArray]) -> tuple[FloatArray, float]:
-    """The lower Cholesky factor of the covariance of ``blocks`` (:func:`whiten_block_banded`) in LAPACK's lower band
-    storage (BANDWIDTH + 1, 3m), and the covariance's ``log det``.
+    """The lower Cholesky factor ``L`` of the covariance of ``blocks`` (:func:`whiten_block_banded`) as rows (3m,
+    BANDWIDTH + 1), ``factor[i, r] = L[i, i - r]``, and the covariance's ``log det``.
 
     Raises:
         SpaceIdInputError: shapes that do not match, or a covariance that is not positive definite."""
-    lag0, lag1, lag2 = blocks
+    lag0, lag1, lag2 = (np.ascontiguousarray(b, dtype=float) for b in blocks)
     m = lag0.shape[0]
     if lag0.shape != (m, 3, 3) or lag1.shape != (max(m - 1, 0), 3, 3) or lag2.shape != (max(m - 2, 0), 3, 3):
         raise SpaceIdInputError(
             f"whiten: expected blocks (m, 3, 3), (m-1, 3, 3), (m-2, 3, 3); got {lag0.shape}, {lag1.shape}, {lag2.shape}"
         )
-    band = np.zeros((BANDWIDTH + 1, 3 * m))  # band[r, j] = Cov[j + r, j]
-    columns = 3 * np.arange(m)
+    band = np.zeros((3 * m, BANDWIDTH + 1))  # band[i, r] = Cov[i, i - r]
+    rows = 3 * np.arange(m)
     for a in range(3):
         for b in range(3):
             if a >= b:
-                band[a - b, columns + b] = lag0[:, a, b]
-            band[3 + a - b, columns[: m - 1] + b] = lag1[:, a, b]
-            band[6 + a - b, columns[: m - 2] + b] = lag2[:, a, b]
-    try:
-        factor = cholesky_banded(band, lower=True, check_finite=False)
-    except np.linalg.LinAlgError:
-        raise SpaceIdInputError("whiten: the covariance is not positive definite") from None
-    return factor, float(2.0 * np.sum(np.log(factor[0])))
+                band[rows + a, a - b] = lag0[:, a, b]
+            band[rows[1:] + a, 3 + a - b] = lag1[:, a, b]
+            band[rows[2:] + a, 6 + a - b] = lag2[:, a, b]
+    factor, log_det = _band_cholesky(band)
+    if not math.isfinite(log_det):
+        raise SpaceIdInputError("whiten: the covariance is not positive definite")
+    return factor, log_det
+
+
+def solve_with_factor(factor: FloatArray, values: FloatArray) -> FloatArray:
+    """``L^-1 values`` for ``values`` (m, 3[, k]) and ``L`` a :func:`band_factor` of 3m rows.
+
+    Raises:
+        SpaceIdInputError: ``values`` of another length."""
+    if values.shape[0] * 3 != factor.shape[0] or values.shape[1] != 3:
+        raise SpaceIdInputError(f"whiten: expected values ({factor.shape[0] // 3}, 3[, k]), got {values.shape}")
+    flat = np.ascontiguousarray(np.asarray(values, dtype=float).reshape(factor.shape[0], -1))
+    return _band_solve(factor, flat).reshape(values.shape)
+
+
+@njit(cache=True)
+def _band_cholesky(band: FloatArray) -> tuple[FloatArray, float]:
+    """The banded Cholesky factor (n, p + 1) of the covariance ``band`` (n, p + 1), ``band[i, r] = Cov[i, i - r]``, row
+    by row (``factor[i, r] = L[i, i - r]``), and ``log det``; ``-inf`` where the covariance is not positive definite."""
+    n, width = band.shape
+    p = width - 1
+    factor = np.zeros((n, width))
+    log_det = 0.0
+    for i in range(n):
+        first = max(0, i - p)
+        for j in range(first, i + 1):
+            value = band[i, i - j]
+            for t in range(first, j):
+                value -= factor[i, i - t] * factor[j, j - t]
+            if j < i:
+                factor[i, i - j] = value / factor[j, 0]
+            else:
+                if not value > 0.0:
+                    return factor, -math.inf
+                factor[i, 0] = math.sqrt(value)
+                log_det += 2.0 * math.log(factor[i, 0])
+    return factor, log_det
+
+
+@njit(cache=True)
+def _band_solve(factor: FloatArray, values: FloatArray) -> FloatArray:
+    """``L^-1 values`` (n, c) by forward substitution with the banded factor of :func:`_band_cholesky`."""
+    n, c = values.shape
+    p = factor.shape[1] - 1
+    out = np.empty((n, c))
+    for i in range(n):
+        first = max(0, i - p)
+        for col in range(c):
+            value = values[i, col]
+            for t in range(first, i):
+                value -= factor[i, i - t] * out[t, col]
+            out[i, col] = value / factor[i, 0]
+    return out
 
 
 def filtered(differences: FloatArray, phi: float) -> FloatArray:
@@ -262,8 +308,8 @@ def fit_propagated_noise(
     """Maximum-likelihood :class:`PropagatedNoise` of steps ``differences`` (m, 3), rad, as ``propagation`` carries the
     encoders' noise into them: the overall scale in closed form; the white error's and the wander's variances relative
     to the encoders' (their logarithms, within :data:`LOG_RATIO_RANGE`) and the wander's correlation (its logit) by
-    Nelder-Mead, from a small white error and wander at correlations 0.05 and 0.9 and from ``start`` (the only start with
-    ``only_from_start``).
+    Nelder-Mead: from ``start`` (a nearby fit's error model) where given, else from a small white error and wander at
+    correlations 0.05 and 0.9 (``only_from_start`` is then the same: a refit from a nearby optimum searches once).
 
     Raises:
         SpaceIdInputError: ``differences`` not (len(propagation), 3), or ``only_from_start`` without a ``start``."""
@@ -288,7 +334,8 @@ def fit_propagated_noise(
         phi = min(max(phi, 1e-6), MAX_CORRELATION * (1.0 - 1e-9))
         return math.log(phi / (MAX_CORRELATION - phi))
 
-    starts = [] if only_from_start else [np.array([-6.0, -6.0, logit(phi)]) for phi in (0.05, 0.9)]
+    # from a nearby fit's error model alone: the defaults cost a search each (~150 likelihoods), and a refit moves little
+    starts = [] if only_from_start or start is not None else [np.array([-6.0, -6.0, logit(phi)]) for phi in (0.05, 0.9)]
     if start is not None:
         if start.encoder_std_rad <= 0.0:
             raise SpaceIdInputError("propagated attitude noise: the start has no encoder noise")
@@ -297,7 +344,13 @@ def fit_propagated_noise(
         starts.append(np.append(ratios, logit(start.walk_correlation)))
     best: tuple[float, PropagatedNoise] | None = None
     for x0 in starts:
-        found = minimize(lambda x: profile(x)[0], x0, method="Nelder-Mead", options={"xatol": 1e-3, "fatol": 1e-3})
+        # a first simplex half a decade wide, a tenth from a nearby fit's error model (scipy's default is 5 % of each
+        # coordinate: 0.3 decades in the ratios but 1e-4 in a logit near 0); stops when the vertices' -2 log L lie
+        # within a thousandth of a unit and span at most 0.3 decades or logit units: the likelihood is flat along a
+        # ratio held at its range's end (an exact attitude's white error), where a tighter span costs a search again
+        simplex = np.vstack([x0, x0 + np.diag([0.5, 0.5, 0.5] if start is None else [0.1, 0.1, 0.1])])
+        options = {"xatol": 0.3, "fatol": 1e-3, "initial_simplex": simplex}
+        found = minimize(lambda x: profile(x)[0], x0, method="Nelder-Mead", options=options)
         candidate = profile(found.x)
         if best is None or candidate[0] < best[0]:
             best = candidate
