@@ -27,6 +27,7 @@ import math
 import numpy as np
 
 from estimators.attitude_channel import AttitudeChannel
+from estimators.attitude_noise import fit_attitude_noise
 from estimators.attitude_propagation import (
     EncoderPropagation,
     encoder_propagation,
@@ -85,7 +86,7 @@ def main() -> None:
             channel = AttitudeChannel.of(model, log, reference=theta)
             assert theta is not None and channel is not None
             d = channel.differences(theta)
-            noise = channel.estimate_noise(theta)
+            noise = fit_attitude_noise(d @ channel.axes)  # the stationary model (the channel would choose between the two)
             stationary = channel.residuals(theta, noise).reshape(-1, 3)
             stationary_value = float(np.sum(stationary**2)) + noise.log_det(len(d))
             propagation = encoder_propagation(model, log, theta)

@@ -73,13 +73,12 @@ def test_a_candidates_refitted_error_model_names_no_effect_on_a_clean_exact_log(
     payload's fit took the stationary error model's wander to zero and gained 30.9 in the profile likelihood ratio,
     all of it in the attitude channel, at p below the candidates' level. Tested with the baseline's error model held,
     the payload gains what the data hold and the verdict is ``none``. The channel now describes this log with the
-    encoders' noise propagated (and a wander), and the refit still moves: the momentum's profile ratio is 49.7, its
-    held one 2.2. (Without the wander in the propagated model, its held ratio was 54.3 and a momentum was named.)"""
+    encoders' noise propagated (and a wander), refitted at each candidate from the baseline's. (Without the wander in
+    the propagated model, the simulator's own integration error named a momentum here, held ratio 54.3.)"""
     env = simulate_variation(draw_variation("none", 9821), 60.0)
     d = diagnose(IdentificationModel(env.robot, "fuel"), env.measurement_log())
     assert d.verdict == NO_MISSING_EFFECT, d.reason
     assert d.weights is not None and isinstance(d.weights.attitude, PropagatedNoise)
-    assert max(c.lr_statistic - c.held_lr_statistic for c in d.candidates) > 8.0
     for c in d.candidates:
         k = c.n_params - d.baseline.n_params
         assert c.p_value == pytest.approx(chi2.sf(c.held_lr_statistic, k))
@@ -116,6 +115,7 @@ def test_a_physical_payload_is_judged_with_the_baselines_error_model() -> None:
     payload = d.fit_of("payload")
     assert payload is not None and payload.attitude_noise is not None and d.weights is not None
     assert not payload.implausible
-    # the baseline's error model has a smooth wander (step correlation 0.99), the candidate's refit a random walk of
-    # smaller steps: slow changes of the prediction look far better determined under it
-    assert min(d.weights.attitude.walk_correlation) > 0.9 and max(payload.attitude_noise.walk_correlation) < 0.1
+    # then the stationary error model: the baseline's had a smooth wander (step correlation 0.99), the candidate's refit
+    # a random walk of smaller steps. The channel now describes this log with the encoders' noise propagated, whose
+    # wander the candidate refits from the baseline's
+    assert isinstance(d.weights.attitude, PropagatedNoise) and isinstance(payload.attitude_noise, PropagatedNoise)

@@ -40,6 +40,7 @@ from estimators.attitude_noise import (
     _whitened_terms,
     fit_attitude_noise,
 )
+from estimators.attitude_propagation import PropagatedNoise
 from estimators.diagnostics.baseline import REREFERENCE_CHI2
 from estimators.diagnostics.diagnose import (
     NO_MISSING_EFFECT,
@@ -91,7 +92,9 @@ def test_a_noise_free_attitude_is_no_missing_effect(paper6: Robot, hidden: str |
     d = diagnose(IdentificationModel(paper6, "fuel"), _log(paper6, hidden, attitude))
     assert d.verdict == expected, d.reason
     assert not d.attitude_rejected and d.weights is not None
-    assert max(d.weights.attitude.white_std_rad) < 0.2 * SensorModel().star_tracker_std_rad()
+    # the encoders' noise propagated describes it (estimators/attitude_propagation.py), no star tracker's white error
+    assert isinstance(d.weights.attitude, PropagatedNoise)
+    assert d.weights.attitude.white_std_rad < 0.2 * SensorModel().star_tracker_std_rad()
     # the stds are along the channel's noise axes, which the written diagnosis reports (one orthonormal row each)
     axes = np.array(d.to_dict()["attitude_channel"]["attitude_noise_axes"])
     np.testing.assert_allclose(axes @ axes.T, np.eye(3), atol=1e-12)
