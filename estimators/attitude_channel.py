@@ -215,6 +215,10 @@ _ERRORS: weakref.WeakKeyDictionary[MeasurementLog, dict[tuple[Any, ...], tuple[F
 #: shared by every model's channel on it
 _PROPAGATIONS: weakref.WeakKeyDictionary[MeasurementLog, dict[tuple[Any, ...], EncoderPropagation]] = weakref.WeakKeyDictionary()
 
+#: the fewest samples of a log whose channel offers the propagated error model (its filtered steps' covariance needs
+#: four steps)
+MIN_PROPAGATED_SAMPLES = 6
+
 #: the error models' numbers of free parameters, charged in their choice (:meth:`AttitudeChannel.estimate_noise`)
 STATIONARY_PARAMETERS, PROPAGATED_PARAMETERS = 9, 4
 
@@ -294,7 +298,7 @@ class AttitudeChannel:
         key = (model.robot.name, model.parameters.names[:n_reference], theta[:n_reference].tobytes())
         if key not in errors:
             errors[key] = channel.integration_error(theta, *fourth_order_increments(model, log, theta), n_base)
-        if coupling is None:
+        if coupling is None and log.n_samples >= MIN_PROPAGATED_SAMPLES:
             # through the model as given, its effects off (the propagation needs a base rate of each sample's joint
             # state alone, which a slosh's carried state breaks; the effects change the momentum map little)
             propagations = _PROPAGATIONS.setdefault(log, {})
@@ -446,7 +450,11 @@ class AttitudeChannel:
 
     def estimate_noise(self, theta: FloatArray, start: ErrorModel | None = None, only_from_start: bool = False) -> ErrorModel:
         """The error model fitted to the residual at ``theta`` (k,) by maximum likelihood. With a ``start`` (a nearby
-        fit's error model, tried as one more start, or the only one with ``only_from_start``), of ``start``'s kind.
+        fit's error model), of ``start``'s kind: a stationary one tried as one more start (the only one with
+        ``only_from_start``); a propagated one searched from the start alone in a narrow simplex, which keeps the start
+        unless the likelihood falls across it (:func:`~estimators.attitude_propagation.fit_propagated_noise`: in
+        practice the candidates' refits keep the baseline's propagated error model, and their profile ratio is the
+        held one).
         Without, both kinds where the channel has the encoders' propagation (no gyro coupling): the stationary one
         (:func:`~estimators.attitude_noise.fit_attitude_noise`, :data:`STATIONARY_PARAMETERS` numbers) and the
         propagated one (:func:`~estimators.attitude_propagation.fit_propagated_noise`, :data:`PROPAGATED_PARAMETERS`),

@@ -308,8 +308,12 @@ def fit_propagated_noise(
     """Maximum-likelihood :class:`PropagatedNoise` of steps ``differences`` (m, 3), rad, as ``propagation`` carries the
     encoders' noise into them: the overall scale in closed form; the white error's and the wander's variances relative
     to the encoders' (their logarithms, within :data:`LOG_RATIO_RANGE`) and the wander's correlation (its logit) by
-    Nelder-Mead: from ``start`` (a nearby fit's error model) where given, else from a small white error and wander at
-    correlations 0.05 and 0.9 (``only_from_start`` is then the same: a refit from a nearby optimum searches once).
+    Nelder-Mead: without ``start``, from a small white error and wander at correlations 0.05 and 0.9; with it, from
+    ``start`` alone (``only_from_start`` is then the same) in a first simplex a tenth of a unit wide, narrower than the
+    stopping span, so the search stops at once where the likelihood changes by less than a thousandth across it: a
+    refit keeps a nearby fit's error model unless the data move it. A wander left at its range's end (an exact
+    attitude's phi near 0) cannot be left from there: the refit does not look for another basin (a smooth wander the
+    candidate's fit would reveal), and the candidates' profile likelihood is then the held one.
 
     Raises:
         SpaceIdInputError: ``differences`` not (len(propagation), 3), or ``only_from_start`` without a ``start``."""
@@ -334,7 +338,7 @@ def fit_propagated_noise(
         phi = min(max(phi, 1e-6), MAX_CORRELATION * (1.0 - 1e-9))
         return math.log(phi / (MAX_CORRELATION - phi))
 
-    # from a nearby fit's error model alone: the defaults cost a search each (~150 likelihoods), and a refit moves little
+    # from a nearby fit's error model alone: the defaults cost a search each (~150 likelihoods)
     starts = [] if only_from_start or start is not None else [np.array([-6.0, -6.0, logit(phi)]) for phi in (0.05, 0.9)]
     if start is not None:
         if start.encoder_std_rad <= 0.0:

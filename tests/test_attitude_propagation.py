@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.linalg import cholesky
 
-from estimators.attitude_channel import AttitudeChannel
+from estimators.attitude_channel import AttitudeChannel, noise_from_dict
 from estimators.attitude_noise import fit_attitude_noise
 from estimators.attitude_propagation import (
     EncoderPropagation,
@@ -160,13 +160,29 @@ def test_the_fitted_error_model_finds_the_simulated_encoder_noise_and_a_star_tra
     tracker = fit_propagated_noise(d + np.diff(errors, axis=0), propagation)
     assert tracker.white_std_rad == pytest.approx(white, rel=0.1)
     assert tracker.encoder_std_rad == pytest.approx(encoder_std, rel=0.1)
-    # the maximum: no nearby error model is more likely, and a start at it returns it
+    # the maximum: no nearby error model is more likely by more than 0.1 unit (each number moved alone; the white error
+    # and the wander sit at the explored range's end, 1e-6 of the encoders' std, below which -2 log L falls by 0.06)
     best = propagated_log_likelihood(d, propagation, exact)
-    for factor in (0.9, 1.1):
-        moved = PropagatedNoise(exact.encoder_std_rad * factor, exact.white_std_rad, exact.walk_std_rad)
-        assert propagated_log_likelihood(d, propagation, moved) > best
-    again = fit_propagated_noise(d, propagation, start=exact, only_from_start=True)
-    assert again.encoder_std_rad == pytest.approx(exact.encoder_std_rad, rel=1e-3)
+    fields = ("encoder_std_rad", "white_std_rad", "walk_std_rad")
+    for label in fields:
+        for factor in (0.5, 2.0):
+            moved = dataclasses.replace(exact, **{label: getattr(exact, label) * factor})
+            assert propagated_log_likelihood(d, propagation, moved) >= best - 0.1
+    for phi in (0.3, 0.9):
+        assert propagated_log_likelihood(d, propagation, dataclasses.replace(exact, walk_correlation=phi)) >= best - 0.1
+    # a white error that carries a quarter of the encoders' variance per axis is far less likely than the fit
+    quarter = exact.encoder_std_rad * float(np.sqrt(np.trace(propagation.unit_diagonal.mean(axis=0)) / 12.0))
+    assert propagated_log_likelihood(d, propagation, dataclasses.replace(exact, white_std_rad=quarter)) > best + 10.0
+    # a refit from a start: the start's own kind and at least as likely
+    again = fit_propagated_noise(d, propagation, start=dataclasses.replace(exact, encoder_std_rad=1.3 * encoder_std))
+    assert propagated_log_likelihood(d, propagation, again) <= propagated_log_likelihood(
+        d, propagation, dataclasses.replace(exact, encoder_std_rad=1.3 * encoder_std)
+    )
+    assert again.encoder_std_rad == pytest.approx(exact.encoder_std_rad, rel=1e-6)  # the scale is profiled exactly
+    # the written form reads back, and noise_from_dict tells the two kinds apart
+    assert PropagatedNoise.from_dict(exact.to_dict()) == exact and noise_from_dict(exact.to_dict()) == exact
+    with pytest.raises(SpaceIdInputError, match="walk_correlation"):
+        PropagatedNoise(1e-6, walk_correlation=1.0)
 
 
 def test_the_channel_chooses_the_propagated_error_model_on_an_exact_attitude_and_whitens_with_it(exact_log: tuple) -> None:
@@ -194,6 +210,18 @@ def test_the_channel_chooses_the_propagated_error_model_on_an_exact_attitude_and
         moved[j] += step[j]
         numeric = (channel.residuals(moved, noise) - r) / step[j]
         np.testing.assert_allclose(jac[:, j], numeric, rtol=1e-3, atol=1e-4 * float(np.max(np.abs(numeric))))
-    # a refit from it keeps its kind, and the profile chi-square against itself is the chi-square
-    assert isinstance(channel.estimate_noise(theta, noise, only_from_start=True), PropagatedNoise)
-    assert channel.profile_chi2(theta, noise, noise) == pytest.approx(float(r @ r))
+    # the profile chi-square between the two kinds is the difference of their -2 log L on the same values
+    assert channel.profile_chi2(theta, stationary, noise) - channel.profile_chi2(theta, noise, noise) == pytest.approx(
+        fit_and_score(channel, theta, stationary)
+        - propagated_log_likelihood(
+            channel.differences(theta) @ channel.axes, encoder_propagation(model, log, theta).in_axes(channel.axes), noise
+        ),
+        rel=1e-9,
+    )
+
+
+def fit_and_score(channel: AttitudeChannel, theta: np.ndarray, noise: object) -> float:
+    """``-2 log L`` of the channel's residual at ``theta`` under a stationary ``noise``: chi-square plus log-determinant."""
+    d = channel.differences(theta) @ channel.axes
+    whitened = noise.whiten(d)  # type: ignore[attr-defined]
+    return float(np.sum(whitened**2)) + noise.log_det(len(d))  # type: ignore[attr-defined]

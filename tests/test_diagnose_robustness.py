@@ -95,7 +95,7 @@ def test_a_noise_free_attitude_is_no_missing_effect(paper6: Robot, hidden: str |
     # the encoders' noise propagated describes it (estimators/attitude_propagation.py), no star tracker's white error
     assert isinstance(d.weights.attitude, PropagatedNoise)
     assert d.weights.attitude.white_std_rad < 0.2 * SensorModel().star_tracker_std_rad()
-    # the stds are along the channel's noise axes, which the written diagnosis reports (one orthonormal row each)
+    # the channel's noise axes, which the written diagnosis reports (one orthonormal row each)
     axes = np.array(d.to_dict()["attitude_channel"]["attitude_noise_axes"])
     np.testing.assert_allclose(axes @ axes.T, np.eye(3), atol=1e-12)
 

@@ -91,8 +91,9 @@ class ChannelWeights:
     #: the unknowns at which the channel takes its integration error out and finds its noise axes (the baseline's fit;
     #: :meth:`~estimators.attitude_channel.AttitudeChannel.of`), or None (the nominal)
     reference: FloatArray | None = None
-    #: the channel's noise axes (3, 3), columns in the first sample's frame, along which ``attitude`` gives its stds
-    #: (:func:`~estimators.attitude_channel.noise_axes`; reported, the channels find them again from ``reference``)
+    #: the channel's noise axes (3, 3), columns in the first sample's frame, along which a stationary ``attitude`` gives
+    #: its stds and in which a propagated one whitens (:func:`~estimators.attitude_channel.noise_axes`; reported, the
+    #: channels find them again from ``reference``)
     axes: FloatArray | None = None
 
     def to_dict(self) -> dict[str, Any]:
