@@ -8,6 +8,7 @@ import types
 
 import numpy as np
 import pytest
+from conftest import FuelEpisode
 
 from estimators.attitude_channel import AttitudeChannel
 from estimators.attitude_noise import AttitudeNoise
@@ -27,9 +28,11 @@ from estimators.diagnostics.diagnose import (
 from estimators.diagnostics.model_fit import _scored
 from estimators.diagnostics.suite import DIAGNOSTIC_EXCITATION
 from estimators.diagnostics.verdict import _prefer_encompassing, _score, rivals
-from estimators.diagnostics.workflow import parameter_errors, run_loop, write_report
+from estimators.diagnostics.workflow import bound_model, parameter_errors, run_loop, true_parameters, write_report
+from estimators.estimate import Estimate
 from estimators.problem import IdentificationModel
 from estimators.registry import make_estimator
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.datasets import simulate_episode
 from spaceid_gym.effects.settings import HiddenEffects
 from spaceid_gym.errors import SpaceIdInputError
@@ -324,6 +327,14 @@ def test_a_fit_beyond_the_liquid_left_is_reported_as_that_liquid(short_fuel_epis
     assert fit.theta[4] <= float(term.liquid_of(fit.theta[None, :4])[0]) and fit.plausible
 
 
+def _estimate_off_the_truth(model: IdentificationModel, ep: FuelEpisode, mdf_factor: float) -> tuple[FloatArray, Estimate]:
+    """An estimate of ``model`` on ``ep``'s log (a :class:`conftest.FuelEpisode`) at the true fuel unknowns with mdf times ``mdf_factor``, effects off."""
+    problem = model.problem(ep.log)
+    theta = problem.parameters.nominal.copy()
+    theta[:4] = ep.theta_true * np.array([mdf_factor, 1.0, 1.0, 1.0])
+    return theta, problem.make_estimate(theta, estimator="test", options={}, seed=None, cost_history=[0.0], wall_time_s=0.0)
+
+
 def test_parameter_errors_use_the_bound_at_the_truth(paper6: Robot, short_fuel_episode) -> None:
     """An estimate 2.5 times high in mdf carries a tank bound too small (it scales as 1 / mdf): the z-scores divide by
     the bound at the true parameters (payload off, as in the truth), and the estimate's own bound is kept beside it."""
@@ -331,9 +342,7 @@ def test_parameter_errors_use_the_bound_at_the_truth(paper6: Robot, short_fuel_e
     truth = {"fuel_consumed_kg": float(ep.theta_true[0]), "tank_position_m": ep.theta_true[1:].tolist()}
     model = IdentificationModel(paper6, "fuel", effects="payload")
     problem = model.problem(ep.log)
-    off = problem.parameters.nominal.copy()
-    off[:4] = ep.theta_true * np.array([2.5, 1.0, 1.0, 1.0])
-    estimate = problem.make_estimate(off, estimator="test", options={}, seed=None, cost_history=[0.0], wall_time_s=0.0)
+    off, estimate = _estimate_off_the_truth(model, ep, 2.5)
     errors = parameter_errors(model, ep.log, estimate, truth)
     assert errors is not None
     at_truth = problem.crlb_std(np.concatenate((ep.theta_true, np.zeros(10))), estimate.noise_std_rad_s)[:4]
@@ -343,6 +352,39 @@ def test_parameter_errors_use_the_bound_at_the_truth(paper6: Robot, short_fuel_e
     np.testing.assert_allclose(errors.z, (off[:4] - ep.theta_true) / at_truth)
     with pytest.raises(SpaceIdInputError, match="not the model's"):
         parameter_errors(IdentificationModel(paper6, "fuel"), ep.log, estimate, truth)
+
+
+def test_the_bound_is_the_simulated_variants(paper6: Robot, short_fuel_episode) -> None:
+    """A pendulum fitted to a spring-mass's log, or a constant torque to a drifting one: the errors divide by the
+    Cramér-Rao bound at the truth of the model that made the data (the spring's, the drift's), the same unknowns
+    otherwise; the estimate's own fuel values and bound are the fitted model's."""
+    ep = short_fuel_episode
+    base_truth = {"fuel_consumed_kg": float(ep.theta_true[0]), "tank_position_m": ep.theta_true[1:].tolist()}
+    spring_truth = {
+        **base_truth,
+        "hidden_effects": {"slosh_mass_kg": 10.0, "slosh_frequency_hz": 0.2, "slosh_damping_ratio": 0.05},
+    }
+    torque_truth = {
+        **base_truth,
+        "hidden_effects": {"external_torque_Nm": [1e-3, -2e-3, 0.0], "external_torque_rate_Nm_s": [0.0, 0.0, 2e-4]},
+    }
+    cases = [
+        ("slosh[model=pendulum]", spring_truth, ("slosh",)),
+        ("external_torque", torque_truth, ("external_torque[drift=true]",)),
+        ("slosh", spring_truth, ("slosh",)),  # already the simulated one: the model itself
+        ("payload", torque_truth, ("payload",)),  # not the simulated effect: the fitted model's bound at the truth
+    ]
+    for fitted_spec, truth, bound_specs in cases:
+        model = IdentificationModel(paper6, "fuel", effects=fitted_spec)
+        assert bound_model(model, truth).effects == bound_specs
+        theta, estimate = _estimate_off_the_truth(model, ep, 1.1)
+        errors = parameter_errors(model, ep.log, estimate, truth)
+        assert errors is not None
+        reference = bound_model(model, truth)
+        std = reference.problem(ep.log).crlb_std(true_parameters(reference, truth), estimate.noise_std_rad_s)[:4]
+        np.testing.assert_allclose(errors.crlb_std, std, rtol=1e-9)
+        np.testing.assert_allclose(errors.error, theta[:4] - ep.theta_true, rtol=1e-12)
+        np.testing.assert_allclose(errors.crlb_std_at_estimate, estimate.theta_std[:4], rtol=1e-12)
 
 
 def test_star_tracker_tells_a_torque_from_a_momentum(paper6: Robot) -> None:

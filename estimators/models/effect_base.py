@@ -126,6 +126,11 @@ class EffectTerm(ABC):
         base parameters."""
         return self.starts(theta_base)
 
+    def describes(self, hidden: Mapping[str, Any]) -> bool:
+        """Whether this term, as configured, is the model that made the simulated effect ``hidden`` (``truth.json``'s
+        ``hidden_effects``), not only one that can stand for it (a slosh pendulum for a spring-mass); true by default."""
+        return True
+
     def grid_from_variant(self, fitted: FloatArray) -> list[FloatArray]:
         """More candidates (k_e,) from ``fitted``, this effect's unknowns as another of its equivalent models fitted
         them (e.g. a slosh pendulum from a spring-mass fit); none by default."""

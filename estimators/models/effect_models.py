@@ -42,7 +42,7 @@ compare the two. Both share the field names of ``truth.json``'s ``hidden_effects
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
@@ -132,6 +132,19 @@ class ExternalTorque(EffectTerm):
     @property
     def spec(self) -> str:
         return f"{self.name}[drift=true]" if self.drift else self.name
+
+    def describes(self, hidden: Mapping[str, Any]) -> bool:
+        """Whether the truth's torque drifts exactly when this term does (no ``external_torque_rate_Nm_s``, or a zero
+        one: a constant torque)."""
+        rate = hidden.get("external_torque_rate_Nm_s")
+        return self.drift == (rate is not None and bool(np.any(np.asarray(rate, dtype=float) != 0.0)))
+
+    def grid_from_variant(self, fitted: FloatArray) -> list[FloatArray]:
+        """With ``drift``: the other variant's momentum and torque (its first six values) with no drift; the drift's
+        own momentum and torque when this is the variant without it. A drifting torque is nested in the constant one's
+        extension, so the constant's fit is the drift model's nearest start."""
+        fitted = np.asarray(fitted, dtype=float)
+        return [np.concatenate((fitted[:6], np.zeros(3)))] if self.drift else [fitted[:6].copy()]
 
     def physical(self, theta: FloatArray) -> dict[str, Any]:
         out = {"initial_momentum_Nms": theta[0:3].copy(), "external_torque_Nm": theta[3:6].copy()}

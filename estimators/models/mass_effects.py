@@ -246,6 +246,10 @@ class Slosh(EffectTerm):
             theta[5] = 1.0 / length_m
         return theta
 
+    def describes(self, hidden: Mapping[str, Any]) -> bool:
+        """Whether the truth's ``slosh_model`` (unset: the spring) is this term's."""
+        return (hidden.get("slosh_model") or "spring") == self.model
+
     def rod(self, theta: FloatArray) -> tuple[FloatArray, FloatArray]:
         """The pendulum's rod for ``theta`` (P, k_e): its unit axis at rest ``a = [cos el cos az, cos el sin az, sin
         el]`` (P, 3), base axes, and curvature (P,) 1/m; for the spring (no rod) ``+z`` and 0, unused."""
