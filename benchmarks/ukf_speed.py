@@ -9,7 +9,11 @@ of each, every run on a fresh problem):
   one composite-inertia computation per sample, included, as in the fits);
 * ``ukf`` ``fit`` on the window (the global start, then ``passes`` tempered passes, default 6);
 * the reference: one ``lm`` fit of the same window (least squares from the default start, analytic Jacobian),
-  and the ratios of both ``ukf`` figures to it.
+  and the ratios of both ``ukf`` figures to it;
+* the streaming pass again with filterpy's own ``predict`` and ``cross_variance`` (the filter's class set back to
+  filterpy's :class:`~filterpy.kalman.UnscentedKalmanFilter`), the ratio of the two and the largest difference of
+  their final states in the unknowns' scales (:class:`~estimators.ukf.RandomWalkUKF` computes the same in closed
+  form).
 
 Usage::
 
@@ -24,10 +28,11 @@ import time
 from collections.abc import Callable
 
 import numpy as np
+from filterpy.kalman import UnscentedKalmanFilter
 
 from estimators.problem import IdentificationModel
 from estimators.registry import make_estimator
-from estimators.ukf import UnscentedKalman
+from estimators.ukf import UKFTracker, UnscentedKalman
 from spaceid_gym.datasets import simulate_episode
 from spaceid_gym.excitation import FourierExcitation
 from spaceid_gym.log import MeasurementLog
@@ -66,12 +71,18 @@ def main() -> None:
     def fresh() -> MeasurementLog:
         return log.window(float(log.t_s[0]), float(log.t_s[-1]) + 1.0)
 
-    def stream() -> None:
+    def stream(plain: bool = False) -> UKFTracker:
         tracker = ukf.tracker(model.problem(fresh()))
+        if plain:
+            tracker.filter.__class__ = UnscentedKalmanFilter  # filterpy's own predict and cross variance
         for index in range(log.n_samples):
             tracker.update(index)
+        return tracker
 
     stream_s = _median_time(stream, args.repeats)
+    plain_s = _median_time(lambda: stream(plain=True), args.repeats)
+    scale = np.asarray(model.problem(log).parameters.scale, dtype=float)
+    state_difference = float(np.max(np.abs(stream().estimate()[0] - stream(plain=True).estimate()[0]) / scale))
     fit_s = _median_time(lambda: ukf.fit(model, fresh()), args.repeats)
     lm_s = _median_time(lambda: make_estimator("lm").fit(model, fresh()), args.repeats)
     per_sample_us = 1e6 * stream_s / log.n_samples
@@ -83,6 +94,9 @@ def main() -> None:
     print(f"reference: one lm fit:        {lm_s:8.3f} s")
     print(f"ratio ukf streaming / lm fit: {stream_s / lm_s:8.2f}")
     print(f"ratio ukf fit / lm fit:       {fit_s / lm_s:8.2f}")
+    print(f"reference: the streaming pass with filterpy's predict and cross variance: {plain_s:8.3f} s")
+    print(f"ratio ukf streaming / filterpy's steps: {stream_s / plain_s:8.2f}")
+    print(f"largest difference of the final states, in the unknowns' scales: {state_difference:.1e}")
 
 
 if __name__ == "__main__":

@@ -9,12 +9,13 @@ from typing import Any
 
 import numpy as np
 import pytest
+from filterpy.kalman import UnscentedKalmanFilter
 from scipy.stats import chi2
 
 from estimators.evaluation import draw_settings, estimator_from_spec
 from estimators.problem import IdentificationModel
 from estimators.registry import available_estimators, make_estimator
-from estimators.ukf import FilterDivergedError, UnscentedKalman, difference_noise_std
+from estimators.ukf import FilterDivergedError, RandomWalkUKF, UnscentedKalman, difference_noise_std
 from spaceid_gym.cli import main
 from spaceid_gym.datasets import simulate_episode
 from spaceid_gym.errors import SpaceIdInputError
@@ -145,6 +146,26 @@ def test_streaming_updates_equal_a_single_pass_fit_and_the_fit_is_deterministic(
     seeded = [make_estimator("ukf", passes=1, seed=4).fit(model, short_fuel_episode.log) for _ in range(2)]
     np.testing.assert_array_equal(seeded[0].theta, seeded[1].theta)
     assert seeded[0].extra["start_theta"] == seeded[1].extra["start_theta"]
+
+
+def test_the_random_walk_steps_in_closed_form_are_filterpys_own(short_fuel_episode: Any) -> None:
+    """:class:`RandomWalkUKF`'s predict (``P + Q``, no transform through the identity) and vectorised cross variance
+    against filterpy's own steps over 20 s with a walk 100 times the default (so that ``Q`` counts): the same state,
+    covariance and innovations to rounding, a streamed wide prior included."""
+    model = IdentificationModel(short_fuel_episode.robot, "fuel", noise_std_rad_s=short_fuel_episode.noise_std_rad_s)
+    problem = model.problem(short_fuel_episode.log)
+    trackers = [make_estimator("ukf", random_walk=1e-3).tracker(problem) for _ in range(2)]
+    assert isinstance(trackers[0].filter, RandomWalkUKF)
+    trackers[1].filter.__class__ = UnscentedKalmanFilter  # filterpy's own predict and cross variance
+    for tracker in trackers:
+        tracker.run()
+    (theta, cov), (theta_ref, cov_ref) = (t.estimate() for t in trackers)
+    scale = np.asarray(problem.parameters.scale)
+    np.testing.assert_allclose(theta / scale, theta_ref / scale, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(cov, cov_ref, rtol=1e-9, atol=1e-12 * float(np.max(np.abs(cov_ref))))
+    np.testing.assert_allclose(trackers[0].nis, trackers[1].nis, rtol=1e-9)
+    with pytest.raises(ValueError, match="identity"):
+        trackers[0].filter.predict(fx=lambda x, dt: 2 * x)
 
 
 def test_random_walk_grows_the_covariance_between_windows(short_fuel_episode: Any) -> None:
