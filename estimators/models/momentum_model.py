@@ -22,6 +22,7 @@ This model never touches the simulator's integration path: it needs only the log
 
 from __future__ import annotations
 
+import copy
 import weakref
 
 import numpy as np
@@ -62,13 +63,12 @@ class MomentumModel:
         n = log.n_samples
         mass, lever = np.empty(n), np.empty((n, 3))
         inertia_com = np.empty((n, 3, 3))
-        arm_momentum = np.empty((n, 6))
-        for i, (q, dq) in enumerate(zip(log.q_rad, log.dq_rad_s, strict=True)):
+        coupling = np.empty((n, 6, model.nv - 6))
+        for i, q in enumerate(log.q_rad):
             q_full[7:] = q
-            coupling = pin.crba(model, data, q_full)[:6, 6:]
+            coupling[i] = pin.crba(model, data, q_full)[:6, 6:]
             arm = data.Ycrb[1]
             mass[i], lever[i], inertia_com[i] = arm.mass, arm.lever, arm.inertia
-            arm_momentum[i] = coupling @ dq
         first_moment = mass[:, None] * lever
         inertia_origin = inertia_com + mass[:, None, None] * point_mass_inertia(lever)
         self.arm_mass_kg = float(sum(model.inertias[i].mass for i in range(2, model.njoints)))
@@ -76,7 +76,8 @@ class MomentumModel:
         self._first_moment = first_moment  # (T, 3), kg m, base frame
         # (T, 6) kg m^2 about the base origin: xx, xy, yy, xz, yz, zz (pinocchio's order)
         self._inertia6 = np.ascontiguousarray(inertia_origin[:, [0, 0, 1, 0, 1, 2], [0, 1, 1, 2, 2, 2]])
-        self._momentum = arm_momentum  # (T, 6), [P; L] of the arm's motion, base frame
+        self._coupling = coupling  # (T, 6, n), the base rows of the joint-space inertia: [P; L] per unit joint rate
+        self._momentum = np.einsum("tij,tj->ti", coupling, log.dq_rad_s)  # (T, 6), [P; L] of the arm's motion, base frame
         self._model, self._data = model, data
         self._q, self._dq = log.q_rad, log.dq_rad_s  # not the log itself: the models shared per log (:meth:`of`) must not keep it
         self._payload_terms: tuple[FloatArray, FloatArray] | None = None
@@ -90,8 +91,28 @@ class MomentumModel:
         for model in shared:
             if model.robot is robot:
                 return model
-        shared.append(cls(robot, log))
+        same_angles = (
+            m
+            for other, models in list(_SHARED.items())
+            if other.q_rad.shape == log.q_rad.shape and np.array_equal(other.q_rad, log.q_rad)
+            for m in models
+        )
+        model = next((m for m in same_angles if m.robot is robot), None)
+        shared.append(cls(robot, log) if model is None else model.with_joint_rates(log.dq_rad_s))
         return shared[-1]
+
+    def with_joint_rates(self, dq_rad_s: FloatArray) -> MomentumModel:
+        """This model on the same joint angles with the joint rates ``dq_rad_s`` (T, n) instead: the arm's composite
+        inertia is shared, its momentum recomputed (linear in the rates), the payload's maps made again when asked.
+        :meth:`of` derives a log's model so from a log with the same joint angles (a log whose joint rates alone were
+        moved, as the encoders' noise propagation moves them)."""
+        dq = np.asarray(dq_rad_s, dtype=float)
+        if dq.shape != self._dq.shape:
+            raise ValueError(f"dq_rad_s: expected shape {self._dq.shape}, got {dq.shape}")
+        other = copy.copy(self)
+        other._momentum = np.einsum("tij,tj->ti", self._coupling, dq)
+        other._dq, other._payload_terms, other._data = dq, None, self._model.createData()
+        return other
 
     # ------------------------------------------------------------------ predictions
     def predict(self, base10: FloatArray, payload10: FloatArray | None = None, samples: Samples = slice(None)) -> FloatArray:
