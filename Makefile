@@ -29,14 +29,17 @@ $(STAMP): pyproject.toml $(LOCK)
 
 install: $(STAMP)
 
-# Compile the numba kernels into their cache (__pycache__ beside each module) once, with a short simulation (fused
-# attitude, slosh), its diagnosis and a short arm simulation: otherwise the first run compiles them, in each test
-# worker at once (about 170 s of a cold test run on 2 cores). A kernel whose module changes is compiled again on use.
+# Compile the numba kernels into their cache (__pycache__ beside each module) once, with two short simulations (fused
+# attitude with slosh; a noise-free attitude, whose channel fits the encoders' noise propagated), their diagnoses and a
+# short arm simulation: otherwise the first run compiles them, in each test worker at once (about 170 s of a cold test
+# run on 2 cores). A kernel whose module changes is compiled again on use.
 # It runs in the virtualenv's install (a plain `make kernels` needs the virtualenv there already).
 kernels:
 	@tmp=$$(mktemp -d) && trap 'rm -rf "$$tmp"' EXIT && echo "make: compiling the numba kernels (about 2 minutes)" && \
 	$(BIN)/spaceid simulate --duration 8 --attitude fused --hidden-effects slosh --out "$$tmp/log" > /dev/null && \
 	$(BIN)/spaceid diagnose --robot paper6 --log "$$tmp/log/log.csv" --params fuel --out "$$tmp/diagnosis" > /dev/null && \
+	$(BIN)/spaceid simulate --duration 8 --attitude exact --out "$$tmp/exact" > /dev/null && \
+	$(BIN)/spaceid diagnose --robot paper6 --log "$$tmp/exact/log.csv" --params fuel --out "$$tmp/exact-diagnosis" > /dev/null && \
 	$(BIN)/spaceid arm simulate --duration 2 --out "$$tmp/arm" > /dev/null
 
 # Python 3.11; the project itself is left out of the lock (--unsafe-package), pip and setuptools are pinned
