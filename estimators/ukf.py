@@ -123,11 +123,16 @@ class RandomWalkUKF(UnscentedKalmanFilter):
     ``x`` and ``P`` (to rounding), so the prediction is ``x``, ``P + Q`` and the sigma points of that, as filterpy's
     own predict computes them, without its first set of sigma points and its transform. :meth:`cross_variance`:
     ``sum_i Wc_i dx_i dz_i^T`` as one product instead of a loop of outer products. Together a third of a 60 s
-    window's fit on ``paper6`` (``benchmarks/ukf_speed.py``)."""
+    window's fit on ``paper6`` (``benchmarks/ukf_speed.py``). The same for any Merwe parameters (the transform of a
+    linear map is exact); one difference: filterpy factorises ``P`` before adding ``Q``, this only ``P + Q``, so a ``P``
+    that is not positive definite but is mended by ``Q`` does not raise here."""
 
     def predict(self, dt: float | None = None, UT: Any = None, fx: Any = None, **fx_args: Any) -> None:
-        if UT is not None or fx is not None or fx_args:
-            raise ValueError("RandomWalkUKF.predict: the walk's transition is the identity; no UT, fx or fx_args")
+        if UT is not None or fx is not None or fx_args or self.x_mean is not None or self.residual_x is not np.subtract:
+            raise ValueError(
+                "RandomWalkUKF.predict: the walk's transition is the identity in a vector space; no UT, fx, fx_args, "
+                "x_mean_fn or residual_x"
+            )
         self.P = self.P + self.Q
         self.sigmas_f = self.points_fn.sigma_points(self.x, self.P)
         self.x_prior = np.copy(self.x)

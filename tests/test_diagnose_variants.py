@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from estimators.diagnostics.diagnose import CANDIDATE_VARIANTS, diagnose
+from estimators.diagnostics.diagnose import CANDIDATE_VARIANTS, diagnose, simulated_variant
+from estimators.diagnostics.power import candidate_spec, effect_dof
 from estimators.diagnostics.suite import DIAGNOSTIC_EXCITATION
 from estimators.diagnostics.workflow import apply_effect, parameter_errors
 from estimators.models.effect_models import make_terms
@@ -50,6 +51,21 @@ def test_the_torque_and_slosh_terms_say_which_truth_they_made(paper6: Robot) -> 
     (back,) = constant.grid_from_variant(np.arange(1.0, 10.0))
     np.testing.assert_array_equal(back, fitted)
     assert CANDIDATE_VARIANTS["external_torque"] == ("external_torque", "external_torque[drift=true]")
+
+
+def test_the_power_tests_the_model_that_made_the_effect(paper6: Robot) -> None:
+    """The expected power and the separation test a drifting torque with the drifting term (nine unknowns), a constant
+    one with the constant term (six), as they test a pendulum slosh with the pendulum."""
+    model = IdentificationModel(paper6, "fuel")
+    drifting = {"hidden_effects": {"external_torque_Nm": list(TORQUE_NM), "external_torque_rate_Nm_s": list(TORQUE_RATE_NM_S)}}
+    constant = {"hidden_effects": {"external_torque_Nm": list(TORQUE_NM)}}
+    assert candidate_spec(paper6, "external_torque", drifting) == "external_torque[drift=true]"
+    assert candidate_spec(paper6, "external_torque", constant) == "external_torque"
+    assert effect_dof(model, "external_torque", drifting) == 9 and effect_dof(model, "external_torque", constant) == 6
+    assert candidate_spec(paper6, "slosh", {"hidden_effects": {"slosh_model": "pendulum", "slosh_mass_kg": 5.0}}) == (
+        "slosh[model=pendulum]"
+    )
+    assert simulated_variant(paper6, "external_torque", {"initial_momentum_Nms": [0.1, 0.0, 0.0]}) is None
 
 
 def test_a_drifting_torque_is_named_with_its_drift_and_leaves_the_noise(quick3: Robot) -> None:

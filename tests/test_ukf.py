@@ -154,16 +154,17 @@ def test_the_random_walk_steps_in_closed_form_are_filterpys_own(short_fuel_episo
     covariance and innovations to rounding, a streamed wide prior included."""
     model = IdentificationModel(short_fuel_episode.robot, "fuel", noise_std_rad_s=short_fuel_episode.noise_std_rad_s)
     problem = model.problem(short_fuel_episode.log)
-    trackers = [make_estimator("ukf", random_walk=1e-3).tracker(problem) for _ in range(2)]
-    assert isinstance(trackers[0].filter, RandomWalkUKF)
-    trackers[1].filter.__class__ = UnscentedKalmanFilter  # filterpy's own predict and cross variance
-    for tracker in trackers:
-        tracker.run()
-    (theta, cov), (theta_ref, cov_ref) = (t.estimate() for t in trackers)
-    scale = np.asarray(problem.parameters.scale)
-    np.testing.assert_allclose(theta / scale, theta_ref / scale, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(cov, cov_ref, rtol=1e-9, atol=1e-12 * float(np.max(np.abs(cov_ref))))
-    np.testing.assert_allclose(trackers[0].nis, trackers[1].nis, rtol=1e-9)
+    for merwe in ({}, {"alpha": 0.3, "kappa": 1.0}):  # the default spread, and one where the centre point has weight
+        trackers = [make_estimator("ukf", random_walk=1e-3, **merwe).tracker(problem) for _ in range(2)]
+        assert isinstance(trackers[0].filter, RandomWalkUKF)
+        trackers[1].filter.__class__ = UnscentedKalmanFilter  # filterpy's own predict and cross variance
+        for tracker in trackers:
+            tracker.run()
+        (theta, cov), (theta_ref, cov_ref) = (t.estimate() for t in trackers)
+        scale = np.asarray(problem.parameters.scale)
+        np.testing.assert_allclose(theta / scale, theta_ref / scale, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(cov, cov_ref, rtol=1e-9, atol=1e-12 * float(np.max(np.abs(cov_ref))))
+        np.testing.assert_allclose(trackers[0].nis, trackers[1].nis, rtol=1e-9)
     with pytest.raises(ValueError, match="identity"):
         trackers[0].filter.predict(fx=lambda x, dt: 2 * x)
 

@@ -68,7 +68,7 @@ For a model (robot, parameterisation, effects already in it) and a log, :func:`d
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import partial
 from typing import Any
@@ -115,13 +115,15 @@ from estimators.diagnostics.verdict import (
 )
 from estimators.estimate import Estimate
 from estimators.least_squares import interior_start
-from estimators.models.effect_models import EFFECT_TERMS
+from estimators.models.effect_models import EFFECT_TERMS, make_terms
 from estimators.parameters import WithEffects
 from estimators.problem import IdentificationModel, IdentificationProblem
 from estimators.registry import make_estimator
 from spaceid_gym.arrays import FloatArray
+from spaceid_gym.effects.settings import EFFECT_FIELDS
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.log import MeasurementLog
+from spaceid_gym.robots import Robot
 
 #: the candidates tried by default: the whole catalogue
 DEFAULT_CANDIDATES: tuple[str, ...] = tuple(EFFECT_TERMS)
@@ -241,6 +243,20 @@ class Diagnosis:
             }
             for c in self.candidates
         ]
+
+
+def simulated_variant(robot: Robot, effect: str, hidden: Mapping[str, Any]) -> str | None:
+    """The spec among ``effect``'s models (:data:`CANDIDATE_VARIANTS`) that made the simulated effect: ``hidden`` is
+    ``truth.json``'s ``hidden_effects`` (:meth:`~estimators.models.effect_base.EffectTerm.describes`); ``None`` where
+    the truth has none of the effect's own fields (:data:`~spaceid_gym.effects.settings.EFFECT_FIELDS`: a momentum alone
+    is no torque) or no model of it describes it."""
+    if not any(field in hidden for field in EFFECT_FIELDS.get(effect, ())):
+        return None
+    for spec in CANDIDATE_VARIANTS.get(effect, (effect,)):
+        (term,) = make_terms(spec, robot)
+        if term.describes(hidden):
+            return spec
+    return None
 
 
 def candidate_model(model: IdentificationModel, effect: str) -> IdentificationModel:

@@ -20,9 +20,10 @@ leaves 27.4, its linear absorption moving the fuel by 24 kg): the power is then 
 
 A slosh is tested with the model it was simulated with: a pendulum truth (``slosh_model = "pendulum"`` in
 ``hidden_effects``) with the pendulum term (:func:`candidate_spec`; six unknowns, its rod's axis and curvature at the
-truth in the nearest model without the effect), a spring-mass with the spring. ``diagnose`` fits both slosh models,
-so its Bonferroni divides ``alpha`` over one test more than its candidates, and the candidates have half of ``alpha``
-(:data:`N_TESTS`).
+truth in the nearest model without the effect), a spring-mass with the spring; likewise a drifting torque (a non-zero
+``external_torque_rate_Nm_s``) with the drifting term (nine unknowns), a constant one with the constant term.
+``diagnose`` fits both models of each, so its Bonferroni divides ``alpha`` over two tests more than its candidates, and
+the candidates have half of ``alpha`` (:data:`N_TESTS`).
 """
 
 from __future__ import annotations
@@ -32,13 +33,20 @@ from typing import Any, NamedTuple
 import numpy as np
 from scipy.stats import chi2, ncx2
 
-from estimators.diagnostics.diagnose import CANDIDATE_VARIANTS, CLEAN_LOG_FAMILIES, DEFAULT_CANDIDATES, candidate_model
+from estimators.diagnostics.diagnose import (
+    CANDIDATE_VARIANTS,
+    CLEAN_LOG_FAMILIES,
+    DEFAULT_CANDIDATES,
+    candidate_model,
+    simulated_variant,
+)
 from estimators.diagnostics.model_fit import independent_attitude_channel
 from estimators.diagnostics.workflow import true_parameters
 from estimators.problem import IdentificationModel, IdentificationProblem
 from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.log import MeasurementLog
+from spaceid_gym.robots import Robot
 
 #: per effect, its unknowns that exist only when the effect does (they keep their true values in the nearest model
 #: without the effect)
@@ -58,13 +66,11 @@ ONLY_WITH_EFFECT: dict[str, tuple[str, ...]] = {
 N_TESTS = CLEAN_LOG_FAMILIES * (len(DEFAULT_CANDIDATES) + sum(len(specs) - 1 for specs in CANDIDATE_VARIANTS.values()))
 
 
-def candidate_spec(effect: str, truth: dict[str, Any]) -> str:
-    """The candidate spec of ``effect`` in the model the truth was simulated with: ``slosh[model=pendulum]`` for a
-    pendulum slosh (``hidden_effects["slosh_model"]``), else ``effect``."""
-    hidden = truth.get("hidden_effects") or {}
-    if effect == "slosh" and hidden.get("slosh_model") == "pendulum":
-        return "slosh[model=pendulum]"
-    return effect
+def candidate_spec(robot: Robot, effect: str, truth: dict[str, Any]) -> str:
+    """The candidate spec of ``effect`` in the model the truth was simulated with
+    (:func:`~estimators.diagnostics.diagnose.simulated_variant`): ``slosh[model=pendulum]`` for a pendulum slosh,
+    ``external_torque[drift=true]`` for a drifting torque, else ``effect``."""
+    return simulated_variant(robot, effect, truth.get("hidden_effects") or {}) or effect
 
 
 def non_centrality(
@@ -80,7 +86,7 @@ def non_centrality(
     """
     if effect in {spec.partition("[")[0] for spec in model_without_effect.effects}:
         raise SpaceIdInputError(f"expected power: the model already has the effect {effect!r}")
-    model = candidate_model(model_without_effect, candidate_spec(effect, truth))
+    model = candidate_model(model_without_effect, candidate_spec(model_without_effect.robot, effect, truth))
     theta = true_parameters(model, truth)
     if theta is None:
         raise SpaceIdInputError("expected power: needs the fuel unknowns in the model and the fuel state in the truth")
@@ -125,7 +131,7 @@ def separation(
     whose nonlinear unknowns (a slosh's frequency) could follow the effect only far from its nominal is judged at its
     nominal, so against it the probability is an upper bound."""
     names = rivals if rivals is not None else tuple(c for c in DEFAULT_CANDIDATES if c != effect)
-    model = candidate_model(model_without_effect, candidate_spec(effect, truth))
+    model = candidate_model(model_without_effect, candidate_spec(model_without_effect.robot, effect, truth))
     for rival in names:
         model = candidate_model(model, rival)
     theta = true_parameters(model, truth)
@@ -204,7 +210,7 @@ def power_of(lam: float, dof: int, alpha: float = 0.01, n_candidates: int = N_TE
 def effect_dof(model_without_effect: IdentificationModel, effect: str, truth: dict[str, Any] | None = None) -> int:
     """The effect's unknowns ``k_e`` in the model ``truth`` was simulated with (:func:`candidate_spec`): the degrees
     of freedom of its likelihood ratio."""
-    spec = effect if truth is None else candidate_spec(effect, truth)
+    spec = effect if truth is None else candidate_spec(model_without_effect.robot, effect, truth)
     return candidate_model(model_without_effect, spec).parameters.terms[-1].n_params
 
 

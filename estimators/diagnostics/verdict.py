@@ -186,7 +186,7 @@ def _prefer_encompassing(
     level = alpha / max(len(challengers), 1)
     winners = []
     for challenger in challengers:
-        pair = (str(leader.effect), str(challenger.effect))
+        pair = (leader.spec, challenger.spec)  # the specs, with a variant's options (the drifting torque, the pendulum)
         both = next((c for c in combined if c.effects[-2:] == pair), None)
         if both is None or not both.chi2 <= min(leader.chi2, challenger.chi2) + JOINT_FIT_SLACK:
             continue
@@ -211,7 +211,9 @@ def _prefer_nesting(best: ModelFit, named: list[ModelFit], alpha: float) -> Mode
     compared (Bonferroni over the tests made here; one in the catalogue). The other named candidates are not
     tested here, and the screening against the baseline (:func:`_score`) is another family with its own
     correction: dividing by them as well only cost power (``paper6`` diagnosis suite, 60 s ``external_torque``
-    logs: 84 % expected power at ``alpha / 3``, 90 % at ``alpha``, from the Fisher information of the torque).
+    logs: 84 % expected power at ``alpha / 3``, 90 % at ``alpha``, from the Fisher information of the torque; those
+    figures are for the constant torque's 3 extra unknowns: where the drifting torque stands for the effect,
+    :data:`~estimators.diagnostics.diagnose.CANDIDATE_VARIANTS`, the test has 6).
     """
     containers = [f for f in named if best.effect in EFFECT_TERMS[str(f.effect)].nests]
     better = [f for f in containers if nested_p_value(best, f) < alpha / len(containers)]

@@ -18,12 +18,11 @@ import numpy as np
 from estimators.attitude_channel import AttitudeChannel, GyroCoupling, noise_from_dict
 from estimators.base import Estimator
 from estimators.diagnostics.compare import Comparison, compare
-from estimators.diagnostics.diagnose import CANDIDATE_VARIANTS, Diagnosis, candidate_model, diagnose
+from estimators.diagnostics.diagnose import Diagnosis, candidate_model, diagnose, simulated_variant
 from estimators.diagnostics.model_fit import ChannelWeights, ModelFit
 from estimators.diagnostics.plots import plot_before_after, plot_correlations, plot_overlay, plot_ranking, plot_residuals
 from estimators.diagnostics.report import HtmlReport
 from estimators.estimate import Estimate
-from estimators.models.effect_models import make_terms
 from estimators.parameters import WithEffects
 from estimators.problem import IdentificationModel
 from estimators.registry import make_estimator
@@ -137,7 +136,8 @@ def bound_model(model: IdentificationModel, truth: dict[str, Any]) -> Identifica
     """The model whose Cramér-Rao bound at ``truth`` (``truth.json`` keys) measures a fit of ``model``: ``model``,
     with each effect term that stands for a simulated effect without being the model that made it (a slosh pendulum
     fitted to a spring-mass's log, a constant torque to a drifting one: :meth:`~estimators.models.effect_base.EffectTerm.describes`)
-    replaced by the variant of :data:`~estimators.diagnostics.diagnose.CANDIDATE_VARIANTS` that made it.
+    replaced by the variant of :data:`~estimators.diagnostics.diagnose.CANDIDATE_VARIANTS` that made it
+    (:func:`~estimators.diagnostics.diagnose.simulated_variant`; a term whose effect the truth lacks is kept).
 
     The truth read into the other variant's unknowns is no point of the simulated system (a spring-mass is a pendulum
     with a straight rod along the pole of its angles, where the azimuth has no information), and the bound there is
@@ -149,14 +149,8 @@ def bound_model(model: IdentificationModel, truth: dict[str, Any]) -> Identifica
     hidden = truth.get("hidden_effects") or {}
     specs = []
     for term in params.terms:
-        spec = term.spec
-        if any(field in hidden for field, _ in term.truth_fields) and not term.describes(hidden):
-            for variant in CANDIDATE_VARIANTS.get(term.name, ()):
-                (other,) = make_terms(variant, model.robot)
-                if other.describes(hidden):
-                    spec = variant
-                    break
-        specs.append(spec)
+        variant = None if term.describes(hidden) else simulated_variant(model.robot, term.name, hidden)
+        specs.append(term.spec if variant is None else variant)
     if specs == [term.spec for term in params.terms]:
         return model
     return IdentificationModel(model.robot, params.base, model.noise_std_rad_s, effects=specs)

@@ -77,7 +77,7 @@ class MomentumModel:
         # (T, 6) kg m^2 about the base origin: xx, xy, yy, xz, yz, zz (pinocchio's order)
         self._inertia6 = np.ascontiguousarray(inertia_origin[:, [0, 0, 1, 0, 1, 2], [0, 1, 1, 2, 2, 2]])
         self._coupling = coupling  # (T, 6, n), the base rows of the joint-space inertia: [P; L] per unit joint rate
-        self._momentum = np.einsum("tij,tj->ti", coupling, log.dq_rad_s)  # (T, 6), [P; L] of the arm's motion, base frame
+        self._momentum = _arm_momentum(coupling, log.dq_rad_s)  # (T, 6), [P; L] of the arm's motion, base frame
         self._model, self._data = model, data
         self._q, self._dq = log.q_rad, log.dq_rad_s  # not the log itself: the models shared per log (:meth:`of`) must not keep it
         self._payload_terms: tuple[FloatArray, FloatArray] | None = None
@@ -106,11 +106,12 @@ class MomentumModel:
         inertia is shared, its momentum recomputed (linear in the rates), the payload's maps made again when asked.
         :meth:`of` derives a log's model so from a log with the same joint angles (a log whose joint rates alone were
         moved, as the encoders' noise propagation moves them)."""
+        # the arm's arrays are shared, not copied: no model writes to them once built
         dq = np.asarray(dq_rad_s, dtype=float)
         if dq.shape != self._dq.shape:
             raise ValueError(f"dq_rad_s: expected shape {self._dq.shape}, got {dq.shape}")
         other = copy.copy(self)
-        other._momentum = np.einsum("tij,tj->ti", self._coupling, dq)
+        other._momentum = _arm_momentum(self._coupling, dq)
         other._dq, other._payload_terms, other._data = dq, None, self._model.createData()
         return other
 
@@ -269,6 +270,12 @@ class MomentumModel:
 
 #: a composite's CoM (3) and its inertia about the CoM inverted: the cofactors (6) and one over the determinant
 CompositeInverse = tuple[float, float, float, float, float, float, float, float, float, float]
+
+
+def _arm_momentum(coupling: FloatArray, dq_rad_s: FloatArray) -> FloatArray:
+    """``[P; L]`` (T, 6) of the arm's motion: each sample's coupling (6, n) times its joint rates (n,), as a stacked
+    matrix product (the same bits as one product per sample)."""
+    return np.matmul(coupling, np.asarray(dq_rad_s, dtype=float)[:, :, None])[:, :, 0]
 
 
 @njit(cache=True, inline="always")
