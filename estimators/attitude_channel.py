@@ -258,7 +258,6 @@ class AttitudeChannel:
         #: ``(A_{j-1} + A_j) / 2 * dt_j`` (T-1, 3, 3): maps the step's midpoint rate to its rotation increment
         self._step_map = midpoint_step_map(relative, log.t_s)
         self.coupling = coupling
-        self._dt_s = np.diff(np.asarray(log.t_s, dtype=float))
         #: the star tracker's increments, less (after :meth:`set_reference`) the midpoint rule's own error
         self._raw_steps = increments
         self._measured_steps = increments
@@ -380,16 +379,38 @@ class AttitudeChannel:
         return steps - self.coupling.response(self.gyro_steps(base))
 
     def gyro_steps(self, base: FloatArray) -> FloatArray:
-        """The gyro's error integrated over each step, (P, T-1, 3), rad, against the base's own rate ``base`` (P, T, 3)
-        at the midpoint samples: ``(base - measured) dt``, the mean of the step's two gyro samples measured.
+        """The gyro's error integrated over each step, (P, T-1, 3), rad, first sample's axes, against the base's own rate
+        ``base`` (P, T, 3) at the midpoint samples: ``(A_{j-1} + A_j) / 2 (base - measured) dt``, the mean of the step's
+        two gyro samples measured.
 
         Against the base's rate, not the gyro's predicted reading: an attitude fused on board integrates the gyro as it
         reads, so its error follows the gyro's whole error, the reading's measurement effects (a delay, a scale, a
         bias) included; a model with such an effect explains the gyro's reading, not the fused attitude's error.
         Against the reading, a delay fitted on a fused log left the filter's response to the delay in the attitude
         residual, and the fuel unknowns bent to absorb it (fuel errors of 8-42 Cramer-Rao std after naming
-        the delay on design logs at 100 Hz)."""
-        return (base[:, 1:] - self.problem.measured[1:]) * self._dt_s[:, None]
+        the delay on design logs at 100 Hz). In the residual's axes (the first sample's), not the body's: the filter
+        turns the body-axis error into an attitude error, which this channel sees rotated by the base's attitude since
+        the first sample (2-4 deg over a minute on ``orbit7``, which leaked 3-7 % of one axis's response into
+        another's)."""
+        return self._frame_steps(base[:, 1:] - self.problem.measured[1:])
+
+    def sensor_gyro_steps(self, sample_rates: FloatArray) -> FloatArray:
+        """:meth:`gyro_steps` (T-1, 3) against the base rate ``sample_rates`` (T, 3), rad/s, that the gyro's own channel
+        predicts at the log's samples (from the joint-rate sensors), each step's two samples averaged.
+
+        The regressor of :func:`estimate_gyro_coupling`: the midpoint rate of :meth:`gyro_steps` comes from encoder
+        differences, whose noise is in this channel's residual too (its predicted increments), so regressing the
+        residual on it pulled the fitted response toward that shared noise's (a lag-0 coefficient of 0.94-0.98 for
+        the filter's 0.888 on held-out log 10529, ``orbit7`` at 50 Hz) and misplaced the filter's response to a large
+        gyro error: after naming a 52 ms delay the fuel unknowns were 4-7 Cramer-Rao std off. The joint-rate sensors'
+        noise is independent of the encoders'."""
+        rates = np.asarray(sample_rates, dtype=float)
+        return self._frame_steps((0.5 * (rates[1:] + rates[:-1]) - self.problem.measured[1:])[None])[0]
+
+    def _frame_steps(self, rate_errors: FloatArray) -> FloatArray:
+        """Rate errors (P, T-1, 3), rad/s, body axes at the steps' midpoints, integrated over each step in the first
+        sample's axes (P, T-1, 3), rad: the midpoint rule's map."""
+        return np.einsum("tij,ptj->pti", self._step_map, rate_errors)
 
     def residuals(self, theta: FloatArray, noise: ErrorModel) -> FloatArray:
         """The whitened differences (3T-6,) at ``theta`` (k,), in the noise axes: unit variance and independent under
@@ -411,12 +432,13 @@ class AttitudeChannel:
         """``d differences / d theta`` (T-1, 3, k) at ``theta`` (k,)."""
         n_t = len(self.measured)
         rates = self.problem.base_rate_jacobian(np.asarray(theta, dtype=float)).reshape(n_t, 3, -1)[1:]
-        steps = np.einsum("tij,tjk->tik", self._step_map, rates)
+        rate_steps = np.einsum("tij,tjk->tik", self._step_map, rates)
+        steps = rate_steps.copy()
         if self._error_jacobian is not None:
             steps[:, :, : self._error_jacobian.shape[2]] += self._error_jacobian
         if self.coupling is None:
             return steps
-        response = self.coupling.response(np.moveaxis(rates * self._dt_s[:, None, None], 2, 0))  # (k, T-1, 3)
+        response = self.coupling.response(np.moveaxis(rate_steps, 2, 0))  # (k, T-1, 3): the gyro steps' derivative
         return steps - np.moveaxis(response, 0, 2)
 
     def jacobian(self, theta: FloatArray, noise: ErrorModel) -> FloatArray:

@@ -16,6 +16,7 @@ from estimators.attitude_channel import (
     GyroCoupling,
     coupling_lags,
 )
+from estimators.attitude_integration import midpoint_step_map, relative_attitudes
 from estimators.diagnostics.baseline import REREFERENCE_CHI2
 from estimators.diagnostics.diagnose import (
     NO_MISSING_EFFECT,
@@ -82,7 +83,9 @@ def test_a_fused_attitude_is_compared_given_the_gyro_error_a_delay_included() ->
     assert channel is not None
     left = channel.differences(theta)
     delay_error = channel.problem.gyro_error(theta)  # the gyro's reading less the base's rate, from the delay
-    response = channel.coupling.response((delay_error[1:] * np.diff(log.t_s)[:, None])[None])[0]
+    # its steps in the residual's axes (the first sample's), as the channel integrates the gyro's error
+    delay_steps = np.einsum("tij,tj->ti", midpoint_step_map(relative_attitudes(log), log.t_s), delay_error[1:])
+    response = channel.coupling.response(delay_steps[None])[0]
     strong = response.std(axis=0) > left.std(axis=0)  # axes where the delay's imprint exceeds the residual's noise
     assert strong.any()
     coefficient = np.sum(left * response, axis=0) / np.sum(response * response, axis=0)

@@ -505,7 +505,8 @@ def independent_attitude_channel(
     channel = AttitudeChannel.of(model, log, reference=theta)
     if channel is None:
         return AttitudeIndependence(None, (0.0, 1.0))
-    gyro_residual = model.problem(log).residuals(theta, count=False).reshape(-1, 3)
+    problem = model.problem(log)
+    gyro_residual = problem.residuals(theta, count=False).reshape(-1, 3)
     dt_s = np.diff(log.t_s)
     differences = channel.differences(theta)
     raw = attitude_gyro_dependence(differences, gyro_residual, dt_s)
@@ -513,7 +514,7 @@ def independent_attitude_channel(
         return AttitudeIndependence(channel, raw)
     if log.n_samples < min_coupling_samples(float(np.median(dt_s))):
         return AttitudeIndependence(None, raw, too_short=True)
-    gyro_steps = channel.gyro_steps(channel.problem.base_rate(np.atleast_2d(theta), count=False))[0]
+    gyro_steps = channel.sensor_gyro_steps(problem.base_rate(np.atleast_2d(theta), count=False)[0])
     coupling = estimate_gyro_coupling(differences, gyro_steps, float(np.median(dt_s)))
     coupled = AttitudeChannel.of(model, log, coupling, reference=theta)
     assert coupled is not None
