@@ -51,7 +51,9 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
+from scipy.optimize import minimize_scalar
 from scipy.spatial.transform import Rotation
+from scipy.special import expit
 
 from estimators.attitude_integration import fourth_order_increments, midpoint_log, midpoint_step_map, relative_attitudes
 from estimators.attitude_noise import AttitudeNoise, fit_attitude_noise
@@ -102,9 +104,13 @@ class GyroCoupling:
     star-tracker corrections and forgets it over the filter's time constant: at high frequency its steps are the gyro's
     (a coefficient near -1 at lag 0 for this channel's sign, ``predicted - measured`` in both), at low frequency the
     star tracker's. Subtracting the filter's response leaves what the attitude measures beyond the gyro: the
-    conditional distribution of the attitude given the gyro, the second factor of their joint likelihood."""
+    conditional distribution of the attitude given the gyro, the second factor of their joint likelihood.
+
+    ``filter_gain``: the gain ``K`` per sample when the response is that of a first-order complementary filter
+    (:func:`first_order_coupling`), ``None`` for a free response."""
 
     coefficients: FloatArray
+    filter_gain: float | None = None
 
     def response(self, gyro_steps: FloatArray) -> FloatArray:
         """The filter's output (P, n, 3) for gyro error steps (P, n, 3), rad: ``sum_l c_l g_{k-l}``, zero before the
@@ -119,12 +125,13 @@ class GyroCoupling:
                 out[:, : n + lag] += c * gyro_steps[:, -lag:]
         return out
 
-    def to_dict(self) -> dict[str, list[list[float]]]:
-        return {"coefficients": np.asarray(self.coefficients, dtype=float).tolist()}
+    def to_dict(self) -> dict[str, Any]:
+        return {"coefficients": np.asarray(self.coefficients, dtype=float).tolist(), "filter_gain": self.filter_gain}
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> GyroCoupling:
-        return cls(np.asarray(data["coefficients"], dtype=float))
+        gain = data.get("filter_gain")
+        return cls(np.asarray(data["coefficients"], dtype=float), None if gain is None else float(gain))
 
 
 #: the span (s) of the lags :func:`estimate_gyro_coupling` fits: several time constants of an on-board attitude filter
@@ -152,28 +159,112 @@ def estimate_gyro_coupling(differences: FloatArray, gyro_steps: FloatArray, dt_s
     Least squares per axis on the first differences of both: a missing effect's slow signature, in both channels
     at that fit, must not be taken for the filter's response (the dependence test,
     :func:`~estimators.diagnostics.model_fit.attitude_gyro_dependence`, differences for the same reason)."""
+    a, g = _differenced(differences, gyro_steps, dt_s)
     n_lags = coupling_lags(dt_s)
-    a = np.diff(np.asarray(differences, dtype=float), axis=0)
-    g = np.diff(np.asarray(gyro_steps, dtype=float), axis=0)
-    n = len(a)
-    if n + 2 < min_coupling_samples(dt_s):
-        raise SpaceIdInputError(
-            f"gyro coupling: {n + 2} samples are too few for {n_lags} lags (need {min_coupling_samples(dt_s)})"
-        )
     coefficients = np.empty((n_lags, 3))
     for axis in range(3):
-        design = np.zeros((n, n_lags))
-        for index in range(n_lags):
-            lag = index - 1
-            if lag >= 0:
-                design[lag:, index] = g[: n - lag, axis]
-            else:
-                design[: n + lag, index] = g[-lag:, axis]
         # sum of the coefficients zero (the last one minus the others): a constant gyro error moves a fused attitude
         # by a bounded amount, its steps by nothing, so a slow gyro error (a bias, a slow rate misfit) passes nothing
-        free = np.linalg.lstsq(design[:, :-1] - design[:, -1:], a[:, axis], rcond=None)[0]
+        free = np.linalg.lstsq(_sum_free(_lagged(g[:, axis], n_lags)), a[:, axis], rcond=None)[0]
         coefficients[:, axis] = np.append(free, -free.sum())
     return GyroCoupling(coefficients)
+
+
+def first_order_coupling(gain: float, dt_s: float) -> GyroCoupling:
+    """The :class:`GyroCoupling` of a first-order complementary filter of gain ``gain`` (``0 < K < 1``) per sample:
+    ``e_k = (1 - K)(e_{k-1} + g_k) + K n_k`` (``e`` the attitude error, ``g`` the gyro's error step, ``n`` the star
+    tracker's) moves the steps of ``e`` by ``1 - K`` at lag 0 and ``-K (1 - K)^l`` at lag ``l >= 1``, the lags of
+    :func:`coupling_lags` (the last one takes the tail, so that the sum is zero)."""
+    if not 0.0 < gain < 1.0:
+        raise SpaceIdInputError(f"gyro coupling: a filter gain must lie in (0, 1), got {gain!r}")
+    n_lags = coupling_lags(dt_s)
+    shape = np.zeros(n_lags)
+    shape[1] = 1.0 - gain
+    shape[2:] = -gain * (1.0 - gain) ** np.arange(1, n_lags - 1)
+    shape[-1] -= shape.sum()
+    return GyroCoupling(np.repeat(shape[:, None], 3, axis=1), gain)
+
+
+#: the filter gains :func:`fit_first_order_coupling` scans (logits of ``K``) before its bounded refinement
+GAIN_LOGITS = np.linspace(-8.0, 6.0, 57)
+
+
+def fit_first_order_coupling(differences: FloatArray, gyro_steps: FloatArray, dt_s: float) -> tuple[GyroCoupling, float]:
+    """The :func:`first_order_coupling` (one gain for the three axes) that fits ``differences`` (n, 3) on ``gyro_steps``
+    (n, 3) best by least squares on their first differences, as :func:`estimate_gyro_coupling` fits, and its residual
+    sum of squares (rad^2): a scan of :data:`GAIN_LOGITS`, then a bounded search between the best one's neighbours."""
+    a, g = _differenced(differences, gyro_steps, dt_s)
+    n_lags = coupling_lags(dt_s)
+    designs = [_lagged(g[:, axis], n_lags) for axis in range(3)]
+
+    def rss(logit: float) -> float:
+        shape = first_order_coupling(float(expit(logit)), dt_s).coefficients[:, 0]
+        return sum(float(np.sum((a[:, axis] - designs[axis] @ shape) ** 2)) for axis in range(3))
+
+    scan = [rss(x) for x in GAIN_LOGITS]
+    best = int(np.argmin(scan))
+    low, high = GAIN_LOGITS[max(best - 1, 0)], GAIN_LOGITS[min(best + 1, len(GAIN_LOGITS) - 1)]
+    logit = float(minimize_scalar(rss, bounds=(low, high), method="bounded").x)
+    if rss(logit) > scan[best]:
+        logit = float(GAIN_LOGITS[best])
+    return first_order_coupling(float(expit(logit)), dt_s), rss(logit)
+
+
+def choose_gyro_coupling(differences: FloatArray, gyro_steps: FloatArray, dt_s: float) -> GyroCoupling:
+    """The attitude's response to the gyro: a first-order complementary filter (one gain,
+    :func:`fit_first_order_coupling`) or a free response per axis (:func:`estimate_gyro_coupling`), whichever has the
+    lower BIC of the regression (``n log(RSS / n) + p log n`` over the three axes' ``n`` values; ``p`` 1 against
+    ``3 (L - 1)``).
+
+    Why not always the free response: its ``3 (L - 1)`` coefficients (66 at 20 Hz, 306 at 100 Hz) carry noise, and a
+    large gyro error (a delay's or a scale's, several times the gyro's noise at the excitation's frequencies) passes
+    through their error into the attitude residual, where the fuel unknowns bend to absorb it. On held-out fused delay
+    logs (seeds 10529-10541, 20-100 Hz) the free response left fuel errors after naming the delay of up to 4-6
+    Cramer-Rao std, whichever gyro steps it was fitted on; the filter's own response (its gain known) left at most 1.7,
+    and a first-order fit at most 2.2. An on-board filter that estimates no gyro bias in steady state is first order;
+    one that does (a second-order response) is fitted freely, by the BIC."""
+    filtered, filtered_rss = fit_first_order_coupling(differences, gyro_steps, dt_s)
+    free = estimate_gyro_coupling(differences, gyro_steps, dt_s)
+    a, g = _differenced(differences, gyro_steps, dt_s)
+    free_rss = float(np.sum((a - free.response(g[None])[0]) ** 2))
+    n_values, n_lags = a.size, coupling_lags(dt_s)
+
+    def bic(rss: float, n_params: int) -> float:
+        return n_values * math.log(max(rss, 1e-300) / n_values) + n_params * math.log(n_values)
+
+    return filtered if bic(filtered_rss, 1) <= bic(free_rss, 3 * (n_lags - 1)) else free
+
+
+def _differenced(differences: FloatArray, gyro_steps: FloatArray, dt_s: float) -> tuple[FloatArray, FloatArray]:
+    """The first differences (n-1, 3) of the residual steps and of the gyro's error steps (each (n, 3)), checked."""
+    a = np.diff(np.asarray(differences, dtype=float), axis=0)
+    g = np.diff(np.asarray(gyro_steps, dtype=float), axis=0)
+    n_lags = coupling_lags(dt_s)
+    if len(a) + 2 < min_coupling_samples(dt_s):
+        raise SpaceIdInputError(
+            f"gyro coupling: {len(a) + 2} samples are too few for {n_lags} lags (need {min_coupling_samples(dt_s)})"
+        )
+    if g.shape != a.shape:
+        raise SpaceIdInputError(f"gyro coupling: expected steps and gyro steps of one shape, got {a.shape} and {g.shape}")
+    return a, g
+
+
+def _lagged(series: FloatArray, n_lags: int) -> FloatArray:
+    """The design (n, n_lags) of a series (n,) at lags -1 .. ``n_lags - 2``, zero beyond its ends."""
+    n = len(series)
+    design = np.zeros((n, n_lags))
+    for index in range(n_lags):
+        lag = index - 1
+        if lag >= 0:
+            design[lag:, index] = series[: n - lag]
+        else:
+            design[: n + lag, index] = series[-lag:]
+    return design
+
+
+def _sum_free(design: FloatArray) -> FloatArray:
+    """A lag design (n, L) with its coefficients' sum held at zero: the last coefficient minus the others (n, L-1)."""
+    return design[:, :-1] - design[:, -1:]
 
 
 #: the midpoint log of each log (:func:`midpoint_log`), made once and shared by every model's channel on it
@@ -398,12 +489,12 @@ class AttitudeChannel:
         """:meth:`gyro_steps` (T-1, 3) against the base rate ``sample_rates`` (T, 3), rad/s, that the gyro's own channel
         predicts at the log's samples (from the joint-rate sensors), each step's two samples averaged.
 
-        The regressor of :func:`estimate_gyro_coupling`: the midpoint rate of :meth:`gyro_steps` comes from encoder
+        The regressor of :func:`choose_gyro_coupling`: the midpoint rate of :meth:`gyro_steps` comes from encoder
         differences, whose noise is in this channel's residual too (its predicted increments), so regressing the
-        residual on it pulled the fitted response toward that shared noise's (a lag-0 coefficient of 0.94-0.98 for
-        the filter's 0.888 on held-out log 10529, ``orbit7`` at 50 Hz) and misplaced the filter's response to a large
-        gyro error: after naming a 52 ms delay the fuel unknowns were 4-7 Cramer-Rao std off. The joint-rate sensors'
-        noise is independent of the encoders'."""
+        residual on it pulled the fitted response toward that shared noise's (a lag-0 coefficient of 0.94-0.98 for the
+        filter's 0.888 on held-out log 10529, ``orbit7`` at 50 Hz; a first-order fit's gain 0.074 for 0.112), and the
+        fuel unknowns were 5-8 Cramer-Rao std off after naming its 52 ms delay. The joint-rate sensors' noise is
+        independent of the encoders' (it shrinks the fit a little instead: 0.124 on 10529)."""
         rates = np.asarray(sample_rates, dtype=float)
         return self._frame_steps((0.5 * (rates[1:] + rates[:-1]) - self.problem.measured[1:])[None])[0]
 

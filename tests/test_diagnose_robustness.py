@@ -21,7 +21,11 @@ from scipy.stats import chi2
 from estimators.attitude_channel import (
     COUPLING_SPAN_S,
     AttitudeChannel,
+    choose_gyro_coupling,
+    coupling_lags,
     estimate_gyro_coupling,
+    first_order_coupling,
+    fit_first_order_coupling,
     min_coupling_samples,
     noise_axes,
 )
@@ -48,6 +52,7 @@ from estimators.diagnostics.diagnose import (
 from estimators.diagnostics.suite import DIAGNOSTIC_EXCITATION
 from estimators.diagnostics.workflow import true_parameters
 from estimators.problem import IdentificationModel
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.datasets import simulate_episode
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.excitation import FourierExcitation
@@ -435,6 +440,54 @@ def test_the_gyro_coupling_of_a_complementary_filter_is_recovered(gain: float) -
     direct[:-1] += c[0] * g[1:]
     np.testing.assert_allclose(coupling.response(g[None])[0], direct, atol=1e-18)
     left = steps - coupling.response(g[None])[0]
+    rho = [np.corrcoef(left[:, i], g[:, i])[0, 1] for i in range(3)]
+    assert np.max(np.abs(rho)) < 0.05
+
+
+def _filtered_attitude_steps(gain: float, bias_gain: float, seed: int) -> tuple[FloatArray, FloatArray]:
+    """Steps (n, 3) of an attitude error fused from gyro steps (n, 3) and a star tracker, and the gyro steps: a
+    complementary filter of gain ``gain`` per sample, estimating a gyro bias with gain ``bias_gain`` (0: none)."""
+    rng = np.random.default_rng(seed)
+    n = 6000
+    g = rng.normal(0.0, 1e-6, (n, 3))
+    star = rng.normal(0.0, 2e-6, (n, 3))
+    e, b = np.zeros((n, 3)), np.zeros(3)
+    for k in range(1, n):
+        predicted = e[k - 1] + g[k] - b
+        innovation = star[k] - predicted
+        e[k] = predicted + gain * innovation
+        b = b - bias_gain * innovation
+    return np.diff(e, axis=0, prepend=0.0), g
+
+
+@pytest.mark.parametrize("gain", [0.05, 0.2])
+def test_a_first_order_filter_is_fitted_by_its_gain_and_chosen(gain: float) -> None:
+    """The first-order filter's response in closed form (independent reference: the filter's recursion run sample by
+    sample) and its gain fitted from the attitude and gyro steps to 3 %; the BIC prefers it to the free response."""
+    steps, g = _filtered_attitude_steps(gain, 0.0, 22)
+    coupling = first_order_coupling(gain, 0.01)
+    impulse = np.zeros((1, 200, 3))
+    impulse[0, 50] = 1.0
+    e = np.zeros(200)
+    for k in range(1, 200):
+        e[k] = (1.0 - gain) * (e[k - 1] + impulse[0, k, 0])
+    lags = coupling_lags(0.01)
+    np.testing.assert_allclose(coupling.response(impulse)[0, 50 : 50 + lags - 2, 0], np.diff(e, prepend=0.0)[50 : 50 + lags - 2])
+    np.testing.assert_allclose(coupling.coefficients.sum(axis=0), 0.0, atol=1e-12)
+    fitted, _ = fit_first_order_coupling(steps, g, 0.01)
+    assert fitted.filter_gain == pytest.approx(gain, rel=0.1)
+    chosen = choose_gyro_coupling(steps, g, 0.01)
+    assert chosen.filter_gain == pytest.approx(fitted.filter_gain)
+
+
+def test_a_filter_estimating_the_gyro_bias_gets_a_free_response() -> None:
+    """A filter that also estimates the gyro's bias responds as a second-order system, which no first-order gain
+    describes: the BIC chooses the free response, and that recovers the filter's steps' dependence on the gyro (the
+    residual steps left uncorrelated with the gyro's)."""
+    steps, g = _filtered_attitude_steps(0.1, 0.08, 23)
+    chosen = choose_gyro_coupling(steps, g, 0.01)
+    assert chosen.filter_gain is None
+    left = steps - chosen.response(g[None])[0]
     rho = [np.corrcoef(left[:, i], g[:, i])[0, 1] for i in range(3)]
     assert np.max(np.abs(rho)) < 0.05
 

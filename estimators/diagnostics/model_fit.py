@@ -19,7 +19,7 @@ from estimators.attitude_channel import (
     AttitudeChannel,
     ErrorModel,
     GyroCoupling,
-    estimate_gyro_coupling,
+    choose_gyro_coupling,
     min_coupling_samples,
 )
 from estimators.base import Estimator
@@ -496,7 +496,7 @@ def independent_attitude_channel(
     """The attitude channel of ``model`` on ``log`` that measures what the gyro does not: as it comes when its residual
     steps at ``theta`` (k,) do not follow the gyro's noise (:func:`attitude_gyro_dependence` p-value >= ``alpha``),
     else given the gyro, with the :class:`~estimators.attitude_channel.GyroCoupling` fitted at ``theta``
-    (:func:`~estimators.attitude_channel.estimate_gyro_coupling`).
+    (:func:`~estimators.attitude_channel.choose_gyro_coupling`).
 
     An attitude fused on board with this gyro follows the gyro between star-tracker corrections, so its steps carry
     the gyro's noise; counting them as a second measurement counted that noise twice (clean logs named gyro_scale or
@@ -514,8 +514,10 @@ def independent_attitude_channel(
         return AttitudeIndependence(channel, raw)
     if log.n_samples < min_coupling_samples(float(np.median(dt_s))):
         return AttitudeIndependence(None, raw, too_short=True)
+    # against the gyro channel's own prediction (the joint-rate sensors): the midpoint prediction's encoder noise is in
+    # the attitude residual too, and pulled the fitted response toward it (AttitudeChannel.sensor_gyro_steps)
     gyro_steps = channel.sensor_gyro_steps(problem.base_rate(np.atleast_2d(theta), count=False)[0])
-    coupling = estimate_gyro_coupling(differences, gyro_steps, float(np.median(dt_s)))
+    coupling = choose_gyro_coupling(differences, gyro_steps, float(np.median(dt_s)))
     coupled = AttitudeChannel.of(model, log, coupling, reference=theta)
     assert coupled is not None
     return AttitudeIndependence(coupled, raw, attitude_gyro_dependence(coupled.differences(theta), gyro_residual, dt_s))
