@@ -189,50 +189,73 @@ def first_order_coupling(gain: float, dt_s: float) -> GyroCoupling:
 GAIN_LOGITS = np.linspace(-8.0, 6.0, 57)
 
 
-def fit_first_order_coupling(differences: FloatArray, gyro_steps: FloatArray, dt_s: float) -> tuple[GyroCoupling, float]:
+def fit_first_order_coupling(
+    differences: FloatArray, gyro_steps: FloatArray, dt_s: float, instrument: FloatArray | None = None
+) -> tuple[GyroCoupling, float]:
     """The :func:`first_order_coupling` (one gain for the three axes) that fits ``differences`` (n, 3) on ``gyro_steps``
-    (n, 3) best by least squares on their first differences, as :func:`estimate_gyro_coupling` fits, and its residual
-    sum of squares (rad^2): a scan of :data:`GAIN_LOGITS`, then a bounded search between the best one's neighbours."""
+    (n, 3) best on their first differences, as :func:`estimate_gyro_coupling` fits, and the objective there: the
+    residual sum of squares (rad^2), or with an ``instrument`` (n, 3) the two-stage least-squares objective (the
+    residual's squared projection on the instrument's lags). A scan of :data:`GAIN_LOGITS`, then a bounded search
+    between the best one's neighbours.
+
+    The instrument: the same gyro error measured with noise of its own (:meth:`AttitudeChannel.sensor_gyro_steps`)
+    where ``gyro_steps`` carry noise the residual shares (:meth:`AttitudeChannel.gyro_steps`: the encoders'). Least
+    squares on the shared-noise steps pulls the gain low (0.074-0.082 for the filter's 0.112 on held-out fused logs of
+    ``orbit7`` and ``paper6`` at 50 Hz), on the instrument's own steps high (the errors in the regressor: 0.128-0.204);
+    the instrumental-variable estimate is free of both (0.105-0.134)."""
     a, g = _differenced(differences, gyro_steps, dt_s)
     n_lags = coupling_lags(dt_s)
     designs = [_lagged(g[:, axis], n_lags) for axis in range(3)]
+    if instrument is None:
+        projections = None
+    else:
+        z = _differenced(differences, instrument, dt_s)[1]
+        projections = [np.linalg.qr(_lagged(z[:, axis], n_lags))[0] for axis in range(3)]
 
-    def rss(logit: float) -> float:
+    def objective(logit: float) -> float:
         shape = first_order_coupling(float(expit(logit)), dt_s).coefficients[:, 0]
-        return sum(float(np.sum((a[:, axis] - designs[axis] @ shape) ** 2)) for axis in range(3))
+        residuals = [a[:, axis] - designs[axis] @ shape for axis in range(3)]
+        if projections is not None:
+            residuals = [q.T @ r for q, r in zip(projections, residuals, strict=True)]
+        return sum(float(r @ r) for r in residuals)
 
-    scan = [rss(x) for x in GAIN_LOGITS]
+    scan = [objective(x) for x in GAIN_LOGITS]
     best = int(np.argmin(scan))
     low, high = GAIN_LOGITS[max(best - 1, 0)], GAIN_LOGITS[min(best + 1, len(GAIN_LOGITS) - 1)]
-    logit = float(minimize_scalar(rss, bounds=(low, high), method="bounded").x)
-    if rss(logit) > scan[best]:
+    logit = float(minimize_scalar(objective, bounds=(low, high), method="bounded").x)
+    if objective(logit) > scan[best]:
         logit = float(GAIN_LOGITS[best])
-    return first_order_coupling(float(expit(logit)), dt_s), rss(logit)
+    return first_order_coupling(float(expit(logit)), dt_s), objective(logit)
 
 
-def choose_gyro_coupling(differences: FloatArray, gyro_steps: FloatArray, dt_s: float) -> GyroCoupling:
+def choose_gyro_coupling(differences: FloatArray, gyro_steps: FloatArray, sensor_steps: FloatArray, dt_s: float) -> GyroCoupling:
     """The attitude's response to the gyro: a first-order complementary filter (one gain,
     :func:`fit_first_order_coupling`) or a free response per axis (:func:`estimate_gyro_coupling`), whichever has the
-    lower BIC of the regression (``n log(RSS / n) + p log n`` over the three axes' ``n`` values; ``p`` 1 against
-    ``3 (L - 1)``).
+    lower BIC of the regression on ``sensor_steps`` (the gyro's error against the joint-rate sensors' prediction,
+    :meth:`AttitudeChannel.sensor_gyro_steps`; ``n log(RSS / n) + p log n`` over the three axes' ``n`` values, ``p`` 1
+    against ``3 (L - 1)``). The first-order gain is then the instrumental-variable estimate on ``gyro_steps``
+    (:meth:`AttitudeChannel.gyro_steps`) with ``sensor_steps`` as the instrument; the free response stays the least
+    squares on ``sensor_steps``.
 
     Why not always the free response: its ``3 (L - 1)`` coefficients (66 at 20 Hz, 306 at 100 Hz) carry noise, and a
     large gyro error (a delay's or a scale's, several times the gyro's noise at the excitation's frequencies) passes
-    through their error into the attitude residual, where the fuel unknowns bend to absorb it. On held-out fused delay
-    logs (seeds 10529-10541, 20-100 Hz) the free response left fuel errors after naming the delay of up to 4-6
-    Cramer-Rao std, whichever gyro steps it was fitted on; the filter's own response (its gain known) left at most 1.7,
-    and a first-order fit at most 2.2. An on-board filter that estimates no gyro bias in steady state is first order;
-    one that does (a second-order response) is fitted freely, by the BIC."""
-    filtered, filtered_rss = fit_first_order_coupling(differences, gyro_steps, dt_s)
-    free = estimate_gyro_coupling(differences, gyro_steps, dt_s)
-    a, g = _differenced(differences, gyro_steps, dt_s)
+    through their error into the attitude residual, where the fuel unknowns bend to absorb it. On fused delay logs
+    (seeds 10529-10546, 20-100 Hz) the free response left fuel errors after naming the delay of up to 4-6 Cramer-Rao
+    std, whichever gyro steps it was fitted on; the filter's own response (its gain known) at most 1.7. An on-board
+    filter that estimates no gyro bias is first order in steady state; one that does (a second-order response) is
+    fitted freely where the BIC tells them apart."""
+    first_order_rss = fit_first_order_coupling(differences, sensor_steps, dt_s)[1]
+    free = estimate_gyro_coupling(differences, sensor_steps, dt_s)
+    a, g = _differenced(differences, sensor_steps, dt_s)
     free_rss = float(np.sum((a - free.response(g[None])[0]) ** 2))
     n_values, n_lags = a.size, coupling_lags(dt_s)
 
     def bic(rss: float, n_params: int) -> float:
         return n_values * math.log(max(rss, 1e-300) / n_values) + n_params * math.log(n_values)
 
-    return filtered if bic(filtered_rss, 1) <= bic(free_rss, 3 * (n_lags - 1)) else free
+    if bic(free_rss, 3 * (n_lags - 1)) < bic(first_order_rss, 1):
+        return free
+    return fit_first_order_coupling(differences, gyro_steps, dt_s, instrument=sensor_steps)[0]
 
 
 def _differenced(differences: FloatArray, gyro_steps: FloatArray, dt_s: float) -> tuple[FloatArray, FloatArray]:
@@ -489,12 +512,11 @@ class AttitudeChannel:
         """:meth:`gyro_steps` (T-1, 3) against the base rate ``sample_rates`` (T, 3), rad/s, that the gyro's own channel
         predicts at the log's samples (from the joint-rate sensors), each step's two samples averaged.
 
-        The regressor of :func:`choose_gyro_coupling`: the midpoint rate of :meth:`gyro_steps` comes from encoder
+        The instrument of :func:`choose_gyro_coupling`: the midpoint rate of :meth:`gyro_steps` comes from encoder
         differences, whose noise is in this channel's residual too (its predicted increments), so regressing the
         residual on it pulled the fitted response toward that shared noise's (a lag-0 coefficient of 0.94-0.98 for the
-        filter's 0.888 on held-out log 10529, ``orbit7`` at 50 Hz; a first-order fit's gain 0.074 for 0.112), and the
-        fuel unknowns were 5-8 Cramer-Rao std off after naming its 52 ms delay. The joint-rate sensors' noise is
-        independent of the encoders' (it shrinks the fit a little instead: 0.124 on 10529)."""
+        filter's 0.888 on held-out log 10529, ``orbit7`` at 50 Hz), and the fuel unknowns were 5-8 Cramer-Rao std off
+        after naming its 52 ms delay. The joint-rate sensors' noise is independent of the encoders'."""
         rates = np.asarray(sample_rates, dtype=float)
         return self._frame_steps((0.5 * (rates[1:] + rates[:-1]) - self.problem.measured[1:])[None])[0]
 

@@ -19,7 +19,7 @@ from estimators.attitude_channel import AttitudeChannel, GyroCoupling, noise_fro
 from estimators.base import Estimator
 from estimators.diagnostics.compare import Comparison, compare
 from estimators.diagnostics.diagnose import Diagnosis, candidate_model, diagnose, simulated_variant
-from estimators.diagnostics.model_fit import ChannelWeights, ModelFit
+from estimators.diagnostics.model_fit import ChannelWeights, ModelFit, profile_filter_gain
 from estimators.diagnostics.plots import plot_before_after, plot_correlations, plot_overlay, plot_ranking, plot_residuals
 from estimators.diagnostics.report import HtmlReport
 from estimators.estimate import Estimate
@@ -48,7 +48,12 @@ def apply_effect(
     extended = candidate_model(model, effect if fit is None else fit.spec)  # the variant the diagnosis chose (slosh)
     if fit is None or diagnosis is None:
         return extended, (estimator or make_estimator("hybrid")).fit(extended, log)
-    return extended, fit_estimate(extended, log, fit, diagnosis.weights, "the candidate's least-squares fit in the diagnosis")
+    # a fused attitude's filter gain profiled with the effect in the model (the regression's gain, fitted at the baseline,
+    # is good to 10-20 %, and the fuel follows its error where the effect moves the gyro much)
+    weights = diagnosis.weights
+    if weights is not None:
+        fit, weights = profile_filter_gain(extended, log, fit, weights, fit.effect)
+    return extended, fit_estimate(extended, log, fit, weights, "the candidate's least-squares fit in the diagnosis")
 
 
 def baseline_estimate(model: IdentificationModel, log: MeasurementLog, diagnosis: Diagnosis) -> Estimate:
