@@ -102,7 +102,7 @@ class GyroCoupling:
     over lags ``-1 .. n_lags - 2`` samples (``coefficients`` (n_lags, 3), lag -1 first), fitted by least squares
     (:func:`estimate_gyro_coupling`). An attitude fused on board with the gyro integrates the gyro's noise between
     star-tracker corrections and forgets it over the filter's time constant: at high frequency its steps are the gyro's
-    (a coefficient near -1 at lag 0 for this channel's sign, ``predicted - measured`` in both), at low frequency the
+    (a coefficient near ``1 - K`` at lag 0, ``K`` the filter's gain per sample: ``predicted - measured`` in both), at low frequency the
     star tracker's. Subtracting the filter's response leaves what the attitude measures beyond the gyro: the
     conditional distribution of the attitude given the gyro, the second factor of their joint likelihood.
 

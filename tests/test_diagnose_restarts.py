@@ -110,6 +110,9 @@ def test_a_large_delay_named_on_a_fused_attitude_leaves_the_fuel_within_its_boun
     assert errors is not None
     z = errors.error / errors.crlb_std
     assert np.max(np.abs(z)) < 2.0, z
+    # the profiled gain is the simulated filter's (the regression's was 0.09-0.13 for 0.112 on such logs)
+    gain = env.sensors.attitude_filter_gain(float(np.median(np.diff(log.t_s))))
+    assert estimate.options["attitude_coupling"]["filter_gain"] == pytest.approx(gain, rel=0.05)
 
 
 def test_a_baseline_short_of_its_profile_optimum_hands_no_candidate_the_difference() -> None:

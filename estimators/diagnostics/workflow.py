@@ -42,7 +42,11 @@ def apply_effect(
     """``model`` with ``effect`` added, identified on ``log``.
 
     With a ``diagnosis`` that fitted this candidate, its fit (least squares from the baseline) is the
-    estimate; otherwise ``estimator`` (default ``hybrid``) identifies the extended model from scratch.
+    estimate; otherwise ``estimator`` (default ``hybrid``) identifies the extended model from scratch. On a fused
+    attitude whose response to the gyro is a first-order filter's, the fit is refined with the filter's gain profiled
+    (:func:`~estimators.diagnostics.model_fit.profile_filter_gain`, 10-15 joint fits); the estimate's options record
+    the gain used (``attitude_coupling``) and the regression's (``attitude_filter_gain_regression``). Its bound takes
+    the profiled gain as known.
     """
     fit = None if diagnosis is None else diagnosis.fit_of(effect)
     extended = candidate_model(model, effect if fit is None else fit.spec)  # the variant the diagnosis chose (slosh)
@@ -51,9 +55,13 @@ def apply_effect(
     # a fused attitude's filter gain profiled with the effect in the model (the regression's gain, fitted at the baseline,
     # is good to 10-20 %, and the fuel follows its error where the effect moves the gyro much)
     weights = diagnosis.weights
+    regression_gain = None if weights is None or weights.coupling is None else weights.coupling.filter_gain
     if weights is not None:
         fit, weights = profile_filter_gain(extended, log, fit, weights, fit.effect)
-    return extended, fit_estimate(extended, log, fit, weights, "the candidate's least-squares fit in the diagnosis")
+    estimate = fit_estimate(extended, log, fit, weights, "the candidate's least-squares fit in the diagnosis")
+    if regression_gain is not None:
+        estimate.options["attitude_filter_gain_regression"] = regression_gain
+    return extended, estimate
 
 
 def baseline_estimate(model: IdentificationModel, log: MeasurementLog, diagnosis: Diagnosis) -> Estimate:
