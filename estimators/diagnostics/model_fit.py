@@ -258,7 +258,7 @@ def fit_model(
                 for b in basins
             ]
             assert weights is not None
-            best = min(fits, key=lambda f: f.rss / weights.gyro_std_rad_s**2 + (f.attitude_chi2 or 0.0))
+            best = min(fits, key=lambda f: joint_objective(f, weights))
             best.wall_time_s = time.perf_counter() - begin
             return best, None
         if channel is not None:
@@ -316,13 +316,17 @@ def fit_model(
 #: fused logs)
 GAIN_PROFILE_LOGITS = 1.0
 
+#: the tolerance of that search, logits (1 % of the gain)
+GAIN_PROFILE_TOLERANCE = 0.01
+
 
 def profile_filter_gain(
     model: IdentificationModel, log: MeasurementLog, fit: ModelFit, weights: ChannelWeights, effect: str | None
 ) -> tuple[ModelFit, ChannelWeights]:
     """``fit`` (of ``model`` on ``log`` under ``weights``) refitted with the fused attitude's filter gain a nuisance of
     the joint likelihood: the gain minimising ``rss / sigma_gyro^2`` plus the attitude's profile chi-square, each gain's
-    fit refined from the best so far (a bounded search within :data:`GAIN_PROFILE_LOGITS` of the regression's gain);
+    fit refined from the best so far (a bounded search within :data:`GAIN_PROFILE_LOGITS` of the regression's gain, once
+    more about the best gain if the search stopped at its edge);
     ``fit`` and ``weights`` as they are unless the coupling is a first-order filter's
     (:func:`~estimators.attitude_channel.choose_gyro_coupling`).
 
@@ -338,27 +342,35 @@ def profile_filter_gain(
     problem = model.problem(log)
     tried: dict[float, tuple[float, ModelFit, ChannelWeights]] = {}
 
-    def objective(fit_: ModelFit) -> float:
-        return fit_.rss / weights.gyro_std_rad_s**2 + (fit_.attitude_chi2 or 0.0)
-
     def refit(logit: float) -> float:
         gain_weights = replace(weights, coupling=first_order_coupling(float(expit(logit)), dt_s))
         start = min(tried.values(), key=lambda entry: entry[0])[1].theta if tried else fit.theta
         refitted = fit_model(
             model, log, starts=[start], effect=effect, weights=gain_weights, problem=problem, profile_noise=True
         )[0]
-        tried[logit] = (objective(refitted), refitted, gain_weights)
+        tried[logit] = (joint_objective(refitted, gain_weights), refitted, gain_weights)
         return tried[logit][0]
 
     center = float(logit_of(coupling.filter_gain))
-    minimize_scalar(
-        refit,
-        bounds=(center - GAIN_PROFILE_LOGITS, center + GAIN_PROFILE_LOGITS),
-        method="bounded",
-        options={"xatol": 0.01},
-    )
-    best = min(tried.values(), key=lambda entry: entry[0])
-    return (best[1], best[2]) if best[0] < objective(fit) else (fit, weights)
+    for _ in range(2):  # once more about the best gain if the first search stopped at its edge
+        minimize_scalar(
+            refit,
+            bounds=(center - GAIN_PROFILE_LOGITS, center + GAIN_PROFILE_LOGITS),
+            method="bounded",
+            options={"xatol": GAIN_PROFILE_TOLERANCE},
+        )
+        best_logit = min(tried, key=lambda logit: tried[logit][0])
+        if abs(abs(best_logit - center) - GAIN_PROFILE_LOGITS) > 2.0 * GAIN_PROFILE_TOLERANCE:
+            break
+        center = best_logit
+    best = tried[best_logit]
+    return (best[1], best[2]) if best[0] < joint_objective(fit, weights) else (fit, weights)
+
+
+def joint_objective(fit: ModelFit, weights: ChannelWeights) -> float:
+    """``-2 log L`` of ``fit`` on both channels up to a constant: ``rss / sigma_gyro^2`` plus the attitude's (profile)
+    chi-square (none without attitude), the score :func:`fit_model` and :func:`profile_filter_gain` compare fits by."""
+    return fit.rss / weights.gyro_std_rad_s**2 + (fit.attitude_chi2 or 0.0)
 
 
 #: two least-squares minima are one when every unknown agrees to this fraction of its search width
