@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import weakref
 from dataclasses import dataclass
 from typing import Any
 
@@ -152,22 +153,44 @@ def encoder_propagation(model: IdentificationModel, log: MeasurementLog, theta: 
     if log.n_samples < 3:
         raise SpaceIdInputError(f"encoder propagation: expected a log of at least 3 samples, got {log.n_samples}")
     step_map = midpoint_step_map(relative_attitudes(log), log.t_s)
-    mid = midpoint_log(log)
+    mid, moved_logs = _moved_logs(log)
     theta = np.asarray(theta, dtype=float)[None]
     base = model.problem(mid).base_rate(theta, count=False)[0, 1:]
     n_joints = mid.q_rad.shape[1]
     angle, rate = np.empty((len(base), 3, n_joints)), np.empty((len(base), 3, n_joints))
-    for joint in range(n_joints):
-        for array, step, out in (("q_rad", ANGLE_STEP_RAD, angle), ("dq_rad_s", RATE_STEP_RAD_S, rate)):
-            moved = np.array(getattr(mid, array), dtype=float)
-            moved[1:, joint] += step
-            shifted = model.problem(dataclasses.replace(mid, **{array: moved})).base_rate(theta, count=False)[0, 1:]
-            out[:, :, joint] = (shifted - base) / step
+    for (array, joint), moved in moved_logs.items():
+        step, out = (ANGLE_STEP_RAD, angle) if array == "q_rad" else (RATE_STEP_RAD_S, rate)
+        shifted = model.problem(moved).base_rate(theta, count=False)[0, 1:]
+        out[:, :, joint] = (shifted - base) / step
     _check_pointwise(model, mid, theta, base)
     dt = np.diff(np.asarray(log.t_s, dtype=float))[:, None, None]
     previous = np.einsum("kij,kjn->kin", step_map, 0.5 * angle - rate / dt)
     current = np.einsum("kij,kjn->kin", step_map, 0.5 * angle + rate / dt)
     return EncoderPropagation(previous, current)
+
+
+def _moved_logs(log: MeasurementLog) -> tuple[MeasurementLog, dict[tuple[str, int], MeasurementLog]]:
+    """The midpoint log of ``log`` and its copies with one joint's angles (``"q_rad"``) or rates (``"dq_rad_s"``) moved by
+    :data:`ANGLE_STEP_RAD` or :data:`RATE_STEP_RAD_S` from the second sample on, by (array, joint); made once per log
+    (logs are read-only), so that the momentum models built on them are shared too: a diagnosis propagates the
+    encoders' noise at two references at least, and each angle-moved log's model costs a pass of the arm's dynamics."""
+    made = _MOVED_LOGS.get(log)
+    if made is None:
+        mid = midpoint_log(log)
+        moved_logs = {}
+        for joint in range(mid.q_rad.shape[1]):
+            for array, step in (("q_rad", ANGLE_STEP_RAD), ("dq_rad_s", RATE_STEP_RAD_S)):
+                moved = np.array(getattr(mid, array), dtype=float)
+                moved[1:, joint] += step
+                moved_logs[array, joint] = dataclasses.replace(mid, **{array: moved})
+        made = _MOVED_LOGS[log] = (mid, moved_logs)
+    return made
+
+
+#: :func:`_moved_logs` per log
+_MOVED_LOGS: weakref.WeakKeyDictionary[MeasurementLog, tuple[MeasurementLog, dict[tuple[str, int], MeasurementLog]]] = (
+    weakref.WeakKeyDictionary()
+)
 
 
 def _check_pointwise(model: IdentificationModel, mid: MeasurementLog, theta: FloatArray, base: FloatArray) -> None:

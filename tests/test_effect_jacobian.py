@@ -100,6 +100,32 @@ def test_slosh_tangents_match_complex_steps_through_the_integration(rod: bool) -
 
 
 @pytest.mark.parametrize("rod", [False, True])
+def test_slosh_tangents_side_by_side_give_each_direction_alone(rod: bool) -> None:
+    """The slosh's tangents along several directions in vector lanes (:data:`~estimators.models.tangents.LANES` at a
+    time, the last group padded) give each direction the numbers of its own integration, to the last bit, and the
+    same values; a zero divisor of the rod's tension raises, as a division by zero did."""
+    rng = np.random.default_rng(5)
+    n_t, n_k = 300, 7
+    t_s = np.arange(n_t) * 0.02
+    twist = 0.05 * np.sin(2.0 * np.pi * t_s[:, None] * rng.uniform(0.05, 0.2, 6))
+    d_twist = 0.01 * rng.standard_normal((n_k, n_t, 6))
+    axis = rng.standard_normal(3)
+    coupling = np.eye(3) + 0.1 * rng.standard_normal((3, 3))
+    inputs = np.concatenate(([0.2, 0.1, -0.3], [15.0, 2.0, 0.05, 3.0], coupling.ravel(), axis / np.linalg.norm(axis)))
+    d_inputs = 0.1 * rng.standard_normal((n_k, N_INPUTS))
+    d_twist[4:], d_inputs[4:, :4], d_inputs[4:, 7:16] = 0.0, 0.0, 0.0  # directions of the oscillator's own unknowns
+    together = slosh_tangents(twist, d_twist, t_s, inputs, d_inputs, rod)
+    for q in range(n_k):
+        alone = slosh_tangents(twist, d_twist[q : q + 1], t_s, inputs, d_inputs[q : q + 1], rod)
+        assert np.array_equal(together[0], alone[0]) and np.array_equal(together[2], alone[2])
+        assert np.array_equal(together[1][q], alone[1][0]) and np.array_equal(together[3][q], alone[3][0])
+    if rod:
+        inputs[7:16] = 0.0  # no coupling: n.C n = 0
+        with pytest.raises(ZeroDivisionError):
+            slosh_tangents(twist, d_twist, t_s, inputs, d_inputs, rod)
+
+
+@pytest.mark.parametrize("rod", [False, True])
 def test_slosh_sets_side_by_side_give_each_set_alone(rod: bool) -> None:
     """The slosh integration of several parameter sets in vector lanes (:func:`slosh_momentum`) gives each set the
     numbers of its integration alone, to the last bit; a zero divisor of the rod's tension raises, as a division by

@@ -122,49 +122,55 @@ def twist_tangents(
 COMPLEX_STEP = 1e-30
 
 
-#: the rows of :func:`_slope_tangent`'s scratch (8, 3), indexed rather than taken as views (a view per stage cost its
-#: reference counts, 5 % of the kernel): the spring and damper's force ``f``, ``C f - b``, the rod's direction ``n``,
-#: ``C n``, and the derivatives of each along a direction
-_F, _ACC, _N, _CN, _DF, _DACC, _DN, _DCN = 0, 1, 2, 3, 4, 5, 6, 7
+#: the rows of :func:`_slope_tangent`'s scratch (4, 3) of the slope itself, indexed rather than taken as views (a view
+#: per stage cost its reference counts, 5 % of the kernel): the spring and damper's force ``f``, ``C f - b``, the rod's
+#: direction ``n`` and ``C n``
+_F, _ACC, _N, _CN = 0, 1, 2, 3
+
+#: the directions of :func:`slosh_tangents` integrated side by side (a lane each, in groups of this many)
+LANES = 4
+
+#: the rows of the directions' scratch of :func:`slosh_tangents` (one column per direction: everything a direction's
+#: tangent reads or writes in one array, as :func:`~estimators.models.slosh_dynamics.integrate_slosh` has its lanes,
+#: which lets the compiler vectorise the directions): the state's derivative (6), the RK4 stage's (6), the four
+#: slopes' (4 x 6), the forcing's at the step's start, middle and end (3 x 9), the coupling's (9, row-major), the rod
+#: axis's (3), those of ``[w^2, 2 zeta w, kappa]`` (3)
+D_STATE, D_STAGE, D_SLOPES, D_STEP, D_COUPLING, D_AXIS, D_OSCILLATOR, N_DIRECTION_ROWS = 0, 6, 12, 36, 63, 72, 75, 78
 
 
 @njit(cache=True, inline="always")
 def _slope_tangent(
     point: FloatArray,
-    d_point: FloatArray,
     step: FloatArray,
-    d_step: FloatArray,
     row: int,
     inputs: FloatArray,
-    d_inputs: FloatArray,
     coupling: FloatArray,
-    d_coupling: FloatArray,
     axis: FloatArray,
     rod: bool,
     slopes: FloatArray,
-    d_slopes: FloatArray,
     s: int,
     work: FloatArray,
-    moves: FloatArray,
+    d: FloatArray,
+    d_point: int,
 ) -> None:
     """``slopes[s]`` = the slope of :func:`~estimators.models.slosh_dynamics.slosh_slope` at ``point`` (6,) for the forcing
-    ``step[row]`` (9,) and the inputs (N_INPUTS,; their ``coupling`` (3, 3) and ``axis`` (3,) given), and
-    ``d_slopes[:, s]`` its derivatives along K directions from those of ``point`` (K, 6), ``step`` (K, 3, 9), the
-    inputs (K, N_INPUTS) and the coupling (K, 3, 3): the slope's forward-mode derivative written out (the spring, the
-    frame's terms, the rod's restoring force and tension). ``work`` (8, 3) is scratch (rows :data:`_F` to :data:`_DCN`).
-    ``moves[q]`` (K,) is false for a direction along which the forcing and the coupling do not change (the
-    oscillator's own frequency, damping and rod): their terms are skipped."""
+    ``step[row]`` (9,) and the inputs (N_INPUTS,; their ``coupling`` (3, 3) and ``axis`` (3,) given), and in each
+    column of the directions' scratch ``d`` (:data:`N_DIRECTION_ROWS`, K) the slope's derivative (rows of slope ``s``)
+    from the point's (rows ``d_point`` to ``d_point + 6``), the forcing's, the coupling's, the axis's and the
+    oscillator's: the slope's forward-mode derivative written out (the spring, the frame's terms, the rod's restoring
+    force and tension), every direction alike (a direction along which the forcing and the coupling do not change has
+    zeros there, which add nothing). ``work`` (4, 3) is scratch (rows :data:`_F` to :data:`_CN`)."""
     omega_n, zeta, kappa = inputs[4], inputs[5], inputs[6]
     stiff, damp = omega_n * omega_n, 2.0 * zeta * omega_n
     wx, wy, wz = step[row, 3], step[row, 4], step[row, 5]
-    w_x = _cross(wx, wy, wz, point[0], point[1], point[2])
-    ax = axis[0] * point[0] + axis[1] * point[1] + axis[2] * point[2]
+    ex, ey, ez = step[row, 6], step[row, 7], step[row, 8]
+    x0, x1, x2, v0, v1, v2 = point[0], point[1], point[2], point[3], point[4], point[5]
+    w_x = _cross(wx, wy, wz, x0, x1, x2)
+    ax = axis[0] * x0 + axis[1] * x1 + axis[2] * x2
     for c in range(3):
         spring = point[c] + ax * axis[c] + kappa * ax * point[c] if rod else point[c]
         work[_F, c] = -stiff * spring - damp * point[3 + c]
-    g = frame_terms(
-        (wx, wy, wz, step[row, 6], step[row, 7], step[row, 8]), (point[0], point[1], point[2]), (point[3], point[4], point[5])
-    )
+    g = frame_terms((wx, wy, wz, ex, ey, ez), (x0, x1, x2), (v0, v1, v2))
     for c in range(3):  # C f - b, before the rod's tension
         work[_ACC, c] = (
             coupling[c, 0] * work[_F, 0] + coupling[c, 1] * work[_F, 1] + coupling[c, 2] * work[_F, 2] - (step[row, c] + g[c])
@@ -173,7 +179,9 @@ def _slope_tangent(
     for c in range(3):
         work[_CN, c] = coupling[c, 0] * work[_N, 0] + coupling[c, 1] * work[_N, 1] + coupling[c, 2] * work[_N, 2]
     den = work[_N, 0] * work[_CN, 0] + work[_N, 1] * work[_CN, 1] + work[_N, 2] * work[_CN, 2]
-    vv = point[3] * point[3] + point[4] * point[4] + point[5] * point[5]
+    if rod and den == 0.0:
+        raise ZeroDivisionError("slosh: the rod's tension divides by n.C n = 0")
+    vv = v0 * v0 + v1 * v1 + v2 * v2
     tension = (
         (work[_N, 0] * work[_ACC, 0] + work[_N, 1] * work[_ACC, 1] + work[_N, 2] * work[_ACC, 2] + kappa * vv) / den
         if rod
@@ -182,65 +190,82 @@ def _slope_tangent(
     for c in range(3):  # the slope itself, as slosh_slope has it (the test holds the two to the same values)
         slopes[s, c] = point[3 + c]
         slopes[s, 3 + c] = work[_ACC, c] - tension * work[_CN, c]
-    for q in range(d_point.shape[0]):
-        dx0, dx1, dx2 = d_point[q, 0], d_point[q, 1], d_point[q, 2]
-        dv0, dv1, dv2 = d_point[q, 3], d_point[q, 4], d_point[q, 5]
-        d_omega_n, d_zeta, d_kappa = d_inputs[q, 4], d_inputs[q, 5], d_inputs[q, 6]
-        d_stiff, d_damp = 2.0 * omega_n * d_omega_n, 2.0 * (d_zeta * omega_n + zeta * d_omega_n)
-        da0, da1, da2 = d_inputs[q, 16], d_inputs[q, 17], d_inputs[q, 18]
-        d_ax = da0 * point[0] + da1 * point[1] + da2 * point[2] + axis[0] * dx0 + axis[1] * dx1 + axis[2] * dx2
-        for c in range(3):
-            dxc = d_point[q, c]
+    # the scalars every direction reads
+    f0, f1, f2 = work[_F, 0], work[_F, 1], work[_F, 2]
+    c00, c01, c02 = coupling[0, 0], coupling[0, 1], coupling[0, 2]
+    c10, c11, c12 = coupling[1, 0], coupling[1, 1], coupling[1, 2]
+    c20, c21, c22 = coupling[2, 0], coupling[2, 1], coupling[2, 2]
+    a0, a1, a2 = axis[0], axis[1], axis[2]
+    s0 = x0 + ax * a0 + kappa * ax * x0 if rod else x0
+    s1 = x1 + ax * a1 + kappa * ax * x1 if rod else x1
+    s2 = x2 + ax * a2 + kappa * ax * x2 if rod else x2
+    acc0, acc1, acc2 = work[_ACC, 0], work[_ACC, 1], work[_ACC, 2]
+    n0, n1, n2 = work[_N, 0], work[_N, 1], work[_N, 2]
+    cn0, cn1, cn2 = work[_CN, 0], work[_CN, 1], work[_CN, 2]
+    o, r, cc = D_SLOPES + 6 * s, D_STEP + 9 * row, D_COUPLING
+    for g in range(d.shape[0]):
+        for q in range(LANES):
+            dx0, dx1, dx2 = d[g, d_point, q], d[g, d_point + 1, q], d[g, d_point + 2, q]
+            dv0, dv1, dv2 = d[g, d_point + 3, q], d[g, d_point + 4, q], d[g, d_point + 5, q]
+            d_stiff, d_damp, d_kappa = d[g, D_OSCILLATOR, q], d[g, D_OSCILLATOR + 1, q], d[g, D_OSCILLATOR + 2, q]
+            da0, da1, da2 = d[g, D_AXIS, q], d[g, D_AXIS + 1, q], d[g, D_AXIS + 2, q]
             if rod:
-                spring = point[c] + ax * axis[c] + kappa * ax * point[c]
-                d_axis_c = d_inputs[q, 16 + c]
-                d_spring = dxc + d_ax * axis[c] + ax * d_axis_c + (d_kappa * ax + kappa * d_ax) * point[c] + kappa * ax * dxc
+                d_ax = da0 * x0 + da1 * x1 + da2 * x2 + a0 * dx0 + a1 * dx1 + a2 * dx2
+                ds0 = dx0 + d_ax * a0 + ax * da0 + (d_kappa * ax + kappa * d_ax) * x0 + kappa * ax * dx0
+                ds1 = dx1 + d_ax * a1 + ax * da1 + (d_kappa * ax + kappa * d_ax) * x1 + kappa * ax * dx1
+                ds2 = dx2 + d_ax * a2 + ax * da2 + (d_kappa * ax + kappa * d_ax) * x2 + kappa * ax * dx2
             else:
-                spring, d_spring = point[c], dxc
-            work[_DF, c] = -d_stiff * spring - stiff * d_spring - d_damp * point[3 + c] - damp * d_point[q, 3 + c]
-        # d g = 2 (dw x x' + w x dx') + d(dw/dt) x x + dw/dt x dx + dw x (w x x) + w x (dw x x + w x dx)
-        e2 = _cross(wx, wy, wz, dv0, dv1, dv2)
-        e4 = _cross(step[row, 6], step[row, 7], step[row, 8], dx0, dx1, dx2)
-        inner = _cross(wx, wy, wz, dx0, dx1, dx2)
-        e6 = _cross(wx, wy, wz, inner[0], inner[1], inner[2])
-        for c in range(3):
-            dg = 2.0 * e2[c] + e4[c] + e6[c]
-            work[_DACC, c] = coupling[c, 0] * work[_DF, 0] + coupling[c, 1] * work[_DF, 1] + coupling[c, 2] * work[_DF, 2] - dg
-            d_slopes[q, s, c] = d_point[q, 3 + c]
-        if moves[q]:  # the forcing's and the coupling's own changes
-            dwx, dwy, dwz = d_step[q, row, 3], d_step[q, row, 4], d_step[q, row, 5]
-            e1 = _cross(dwx, dwy, dwz, point[3], point[4], point[5])
-            e3 = _cross(d_step[q, row, 6], d_step[q, row, 7], d_step[q, row, 8], point[0], point[1], point[2])
+                ds0, ds1, ds2 = dx0, dx1, dx2
+            df0 = -d_stiff * s0 - stiff * ds0 - d_damp * v0 - damp * dv0
+            df1 = -d_stiff * s1 - stiff * ds1 - d_damp * v1 - damp * dv1
+            df2 = -d_stiff * s2 - stiff * ds2 - d_damp * v2 - damp * dv2
+            # d g = 2 (dw x x' + w x dx') + d(dw/dt) x x + dw/dt x dx + dw x (w x x) + w x (dw x x + w x dx)
+            e2 = _cross(wx, wy, wz, dv0, dv1, dv2)
+            e4 = _cross(ex, ey, ez, dx0, dx1, dx2)
+            inner = _cross(wx, wy, wz, dx0, dx1, dx2)
+            e6 = _cross(wx, wy, wz, inner[0], inner[1], inner[2])
+            dacc0 = c00 * df0 + c01 * df1 + c02 * df2 - (2.0 * e2[0] + e4[0] + e6[0])
+            dacc1 = c10 * df0 + c11 * df1 + c12 * df2 - (2.0 * e2[1] + e4[1] + e6[1])
+            dacc2 = c20 * df0 + c21 * df1 + c22 * df2 - (2.0 * e2[2] + e4[2] + e6[2])
+            # the forcing's and the coupling's own changes
+            dwx, dwy, dwz = d[g, r + 3, q], d[g, r + 4, q], d[g, r + 5, q]
+            e1 = _cross(dwx, dwy, dwz, v0, v1, v2)
+            e3 = _cross(d[g, r + 6, q], d[g, r + 7, q], d[g, r + 8, q], x0, x1, x2)
             e5 = _cross(dwx, dwy, dwz, w_x[0], w_x[1], w_x[2])
-            inner = _cross(dwx, dwy, dwz, point[0], point[1], point[2])
+            inner = _cross(dwx, dwy, dwz, x0, x1, x2)
             e7 = _cross(wx, wy, wz, inner[0], inner[1], inner[2])
-            for c in range(3):
-                work[_DACC, c] += (
-                    d_coupling[q, c, 0] * work[_F, 0] + d_coupling[q, c, 1] * work[_F, 1] + d_coupling[q, c, 2] * work[_F, 2]
-                    - (d_step[q, row, c] + 2.0 * e1[c] + e3[c] + e5[c] + e7[c])
-                )  # fmt: skip
-        for c in range(3):
-            d_slopes[q, s, 3 + c] = work[_DACC, c]
-        if rod:
-            for c in range(3):
-                work[_DN, c] = d_inputs[q, 16 + c] + d_kappa * point[c] + kappa * d_point[q, c]
-            d_num = d_kappa * vv + 2.0 * kappa * (point[3] * dv0 + point[4] * dv1 + point[5] * dv2)
-            d_den = 0.0
-            for c in range(3):
-                work[_DCN, c] = coupling[c, 0] * work[_DN, 0] + coupling[c, 1] * work[_DN, 1] + coupling[c, 2] * work[_DN, 2]
-                if moves[q]:
-                    work[_DCN, c] += (
-                        d_coupling[q, c, 0] * work[_N, 0] + d_coupling[q, c, 1] * work[_N, 1] + d_coupling[q, c, 2] * work[_N, 2]
-                    )
-                d_num += work[_DN, c] * work[_ACC, c] + work[_N, c] * work[_DACC, c]
-            for c in range(3):
-                d_den += work[_DN, c] * work[_CN, c] + work[_N, c] * work[_DCN, c]
-            d_tension = (d_num - tension * d_den) / den
-            for c in range(3):
-                d_slopes[q, s, 3 + c] -= d_tension * work[_CN, c] + tension * work[_DCN, c]
+            dc00, dc01, dc02 = d[g, cc, q], d[g, cc + 1, q], d[g, cc + 2, q]
+            dc10, dc11, dc12 = d[g, cc + 3, q], d[g, cc + 4, q], d[g, cc + 5, q]
+            dc20, dc21, dc22 = d[g, cc + 6, q], d[g, cc + 7, q], d[g, cc + 8, q]
+            dacc0 += dc00 * f0 + dc01 * f1 + dc02 * f2 - (d[g, r, q] + 2.0 * e1[0] + e3[0] + e5[0] + e7[0])
+            dacc1 += dc10 * f0 + dc11 * f1 + dc12 * f2 - (d[g, r + 1, q] + 2.0 * e1[1] + e3[1] + e5[1] + e7[1])
+            dacc2 += dc20 * f0 + dc21 * f1 + dc22 * f2 - (d[g, r + 2, q] + 2.0 * e1[2] + e3[2] + e5[2] + e7[2])
+            d[g, o, q], d[g, o + 1, q], d[g, o + 2, q] = dv0, dv1, dv2
+            if rod:
+                dn0, dn1, dn2 = (
+                    da0 + d_kappa * x0 + kappa * dx0,
+                    da1 + d_kappa * x1 + kappa * dx1,
+                    da2 + d_kappa * x2 + kappa * dx2,
+                )
+                dcn0 = c00 * dn0 + c01 * dn1 + c02 * dn2 + (dc00 * n0 + dc01 * n1 + dc02 * n2)
+                dcn1 = c10 * dn0 + c11 * dn1 + c12 * dn2 + (dc10 * n0 + dc11 * n1 + dc12 * n2)
+                dcn2 = c20 * dn0 + c21 * dn1 + c22 * dn2 + (dc20 * n0 + dc21 * n1 + dc22 * n2)
+                d_num = d_kappa * vv + 2.0 * kappa * (v0 * dv0 + v1 * dv1 + v2 * dv2)
+                d_num += dn0 * acc0 + n0 * dacc0
+                d_num += dn1 * acc1 + n1 * dacc1
+                d_num += dn2 * acc2 + n2 * dacc2
+                d_den = 0.0
+                d_den += dn0 * cn0 + n0 * dcn0
+                d_den += dn1 * cn1 + n1 * dcn1
+                d_den += dn2 * cn2 + n2 * dcn2
+                d_tension = (d_num - tension * d_den) / den
+                dacc0 -= d_tension * cn0 + tension * dcn0
+                dacc1 -= d_tension * cn1 + tension * dcn1
+                dacc2 -= d_tension * cn2 + tension * dcn2
+            d[g, o + 3, q], d[g, o + 4, q], d[g, o + 5, q] = dacc0, dacc1, dacc2
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")  # no division check in the directions' loop, which would stop its vectorising
 def slosh_tangents(
     twist: FloatArray, d_twist: FloatArray, t_s: FloatArray, inputs: FloatArray, d_inputs: FloatArray, rod: bool
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
@@ -248,57 +273,77 @@ def slosh_tangents(
     :func:`~estimators.models.slosh_dynamics.integrate_slosh` for one parameter set, and their derivatives (K, T, 6)
     and (K, T, 10) along K directions, from the rest's twist (T, 6) and its derivatives (K, T, 6) and the inputs
     (:data:`~estimators.models.slosh_dynamics.N_INPUTS`,) and their derivatives (K, N_INPUTS): RK4 of the oscillator
-    and of its tangents (:func:`_slope_tangent`), the forcing's and the outputs' derivatives by complex steps."""
+    and of its tangents (:func:`_slope_tangent`, the directions side by side), the forcing's and the outputs'
+    derivatives by complex steps.
+
+    Raises:
+        ZeroDivisionError: the rod's tension has a zero divisor ``n.C n`` (as the prediction's integration does)."""
     n_k, n_t = d_twist.shape[0], twist.shape[0]
     h = COMPLEX_STEP
     tank, mass, coupling, axis = inputs[0:3], inputs[3], inputs[7:16].reshape(3, 3), inputs[16:19]
-    d_coupling = np.ascontiguousarray(d_inputs[:, 7:16]).reshape(n_k, 3, 3)
-    work = np.empty((8, 3))
-    forcing, d_forcing = np.empty((n_t, 9)), np.empty((n_k, n_t, 9))
+    work = np.empty((4, 3))
+    n_groups = (n_k + LANES - 1) // LANES  # the directions in groups of LANES, the last padded with zero directions
+    forcing, d_forcing = np.empty((n_t, 9)), np.zeros((n_t, n_groups, 9, LANES))
     c_forcing = np.empty((n_t, 9), dtype=np.complex128)
     for k in range(n_t):
         tank_forcing(twist, t_s, tank, k, forcing)
-    moves = np.zeros(n_k, dtype=np.bool_)  # whether the forcing or the coupling changes along a direction
-    for q in range(n_k):
-        moves[q] = np.any(d_twist[q] != 0.0) or np.any(d_inputs[q, 0:3] != 0.0) or np.any(d_inputs[q, 7:16] != 0.0)
-        if not moves[q]:
-            d_forcing[q] = 0.0
-            continue
-        c_twist, c_tank = twist + 1j * h * d_twist[q], tank + 1j * h * d_inputs[q, 0:3]
-        for k in range(n_t):
-            tank_forcing(c_twist, t_s, c_tank, k, c_forcing)
-        d_forcing[q] = c_forcing.imag / h
+    omega_n, zeta = inputs[4], inputs[5]
+    d = np.zeros((n_groups, N_DIRECTION_ROWS, LANES))
+    for direction in range(n_k):
+        g, q = direction // LANES, direction % LANES
+        for i in range(9):
+            d[g, D_COUPLING + i, q] = d_inputs[direction, 7 + i]
+        for i in range(3):
+            d[g, D_AXIS + i, q] = d_inputs[direction, 16 + i]
+        d_omega_n, d_zeta = d_inputs[direction, 4], d_inputs[direction, 5]
+        d[g, D_OSCILLATOR, q] = 2.0 * omega_n * d_omega_n
+        d[g, D_OSCILLATOR + 1, q] = 2.0 * (d_zeta * omega_n + zeta * d_omega_n)
+        d[g, D_OSCILLATOR + 2, q] = d_inputs[direction, 6]
+        # the forcing's derivative where it changes along the direction (elsewhere zeros)
+        if np.any(d_twist[direction] != 0.0) or np.any(d_inputs[direction, 0:3] != 0.0):
+            c_twist, c_tank = twist + 1j * h * d_twist[direction], tank + 1j * h * d_inputs[direction, 0:3]
+            for k in range(n_t):
+                tank_forcing(c_twist, t_s, c_tank, k, c_forcing)
+            d_forcing[:, g, :, q] = c_forcing.imag / h
     state, stage, slopes, step = np.zeros(6), np.empty(6), np.empty((4, 6)), np.empty((3, 9))
-    d_state, d_stage = np.zeros((n_k, 6)), np.empty((n_k, 6))
-    d_slopes, d_step = np.empty((n_k, 4, 6)), np.empty((n_k, 3, 9))
     states, d_states = np.zeros((n_t, 6)), np.zeros((n_k, n_t, 6))
     for k in range(1, n_t):
         dt = t_s[k] - t_s[k - 1]
         for i in range(9):
             step[0, i], step[2, i] = forcing[k - 1, i], forcing[k, i]
             step[1, i] = 0.5 * (step[0, i] + step[2, i])
-            for q in range(n_k):
-                d_step[q, 0, i], d_step[q, 2, i] = d_forcing[q, k - 1, i], d_forcing[q, k, i]
-                d_step[q, 1, i] = 0.5 * (d_step[q, 0, i] + d_step[q, 2, i])
+        for g in range(n_groups):
+            for i in range(9):
+                for q in range(LANES):
+                    d[g, D_STEP + i, q], d[g, D_STEP + 18 + i, q] = d_forcing[k - 1, g, i, q], d_forcing[k, g, i, q]
+                    d[g, D_STEP + 9 + i, q] = 0.5 * (d[g, D_STEP + i, q] + d[g, D_STEP + 18 + i, q])
         for s in range(4):  # RK4 stages: the step's start, its middle twice, its end
             fraction = 0.0 if s == 0 else (1.0 if s == 3 else 0.5)
-            for i in range(6):
-                stage[i] = state[i] + fraction * dt * slopes[s - 1, i] if s > 0 else state[i]
-                for q in range(n_k):
-                    d_stage[q, i] = d_state[q, i] + fraction * dt * d_slopes[q, s - 1, i] if s > 0 else d_state[q, i]
+            if s > 0:
+                for i in range(6):
+                    stage[i] = state[i] + fraction * dt * slopes[s - 1, i]
+                for g in range(n_groups):
+                    for i in range(6):
+                        for q in range(LANES):
+                            d[g, D_STAGE + i, q] = d[g, D_STATE + i, q] + fraction * dt * d[g, D_SLOPES + 6 * (s - 1) + i, q]
             row = 0 if s == 0 else (1 if s < 3 else 2)
-            _slope_tangent(
-                stage, d_stage, step, d_step, row, inputs, d_inputs, coupling, d_coupling, axis, rod, slopes, d_slopes, s, work,
-                moves,
-            )  # fmt: skip
+            _slope_tangent(state if s == 0 else stage, step, row, inputs, coupling, axis, rod, slopes, s, work, d,
+                           D_STATE if s == 0 else D_STAGE)  # fmt: skip
         for i in range(6):
             state[i] += (dt / 6.0) * (slopes[0, i] + 2.0 * slopes[1, i] + 2.0 * slopes[2, i] + slopes[3, i])
             states[k, i] = state[i]
-            for q in range(n_k):
-                d_state[q, i] += (dt / 6.0) * (
-                    d_slopes[q, 0, i] + 2.0 * d_slopes[q, 1, i] + 2.0 * d_slopes[q, 2, i] + d_slopes[q, 3, i]
-                )
-                d_states[q, k, i] = d_state[q, i]
+        for g in range(n_groups):
+            for i in range(6):
+                for q in range(LANES):
+                    d[g, D_STATE + i, q] += (dt / 6.0) * (
+                        d[g, D_SLOPES + i, q]
+                        + 2.0 * d[g, D_SLOPES + 6 + i, q]
+                        + 2.0 * d[g, D_SLOPES + 12 + i, q]
+                        + d[g, D_SLOPES + 18 + i, q]
+                    )
+        for direction in range(n_k):
+            for i in range(6):
+                d_states[direction, k, i] = d[direction // LANES, D_STATE + i, direction % LANES]
     out, moved = np.zeros((n_t, 6)), np.zeros((n_t, 10))
     slosh_outputs(states, tank, mass, out, moved)
     d_out, d_moved = np.zeros((n_k, n_t, 6)), np.zeros((n_k, n_t, 10))
