@@ -101,7 +101,7 @@ def test_slosh_tangents_match_complex_steps_through_the_integration(rod: bool) -
 
 @pytest.mark.parametrize("rod", [False, True])
 def test_slosh_tangents_side_by_side_give_each_direction_alone(rod: bool) -> None:
-    """The slosh's tangents along several directions in vector lanes (:data:`~estimators.models.tangents.LANES` at a
+    """The slosh's tangents along several directions in vector lanes (:data:`~estimators.models.tangents.DIRECTION_LANES` at a
     time, the last group padded) give each direction the numbers of its own integration, to the last bit, and the
     same values; a zero divisor of the rod's tension raises, as a division by zero did."""
     rng = np.random.default_rng(5)
@@ -123,6 +123,20 @@ def test_slosh_tangents_side_by_side_give_each_direction_alone(rod: bool) -> Non
         inputs[7:16] = 0.0  # no coupling: n.C n = 0
         with pytest.raises(ZeroDivisionError):
             slosh_tangents(twist, d_twist, t_s, inputs, d_inputs, rod)
+
+
+def test_the_slosh_kernels_refuse_times_that_do_not_increase() -> None:
+    """The tank's forcing divides by the time steps, and both slosh kernels run with numpy's error model (a division
+    by zero gives inf): a repeated time raises instead of returning non-finite numbers."""
+    n_t = 50
+    t_s = np.arange(n_t) * 0.02
+    t_s[1] = t_s[0]
+    twist = np.full((n_t, 6), 0.01)
+    inputs = np.concatenate(([0.2, 0.1, -0.3], [15.0, 2.0, 0.05, 0.0], np.eye(3).ravel(), [0.0, 0.0, 1.0]))
+    with pytest.raises(ValueError, match="increase strictly"):
+        slosh_momentum(twist[None], t_s, inputs[None], False)
+    with pytest.raises(ValueError, match="increase strictly"):
+        slosh_tangents(twist, np.zeros((2, n_t, 6)), t_s, inputs, np.zeros((2, N_INPUTS)), False)
 
 
 @pytest.mark.parametrize("rod", [False, True])

@@ -593,8 +593,10 @@ def independent_attitude_channel(
 GRID_STARTS = 3
 
 #: candidates per batched evaluation of a grid (:func:`best_of_grid`): a slosh scan's 412 at once, on a 60 s log at
-#: 50 Hz, allocate arrays of 100 MB and cost 1.5 times as much as in batches of 64; batches of 32 cost 0.70-0.73 times
-#: what batches of 64 do (the pendulum's scan on the benchmark's log, ``benchmarks/diagnose_speed.py``), of 16 about 0.75
+#: 50 Hz, allocate arrays of 100 MB and cost 1.5 times as much as in batches of 64; batches of 32 cost 0.61-0.74 times
+#: what batches of 64 do (the pendulum's scan on the benchmark's log, ``benchmarks/diagnose_speed.py``), of 16 about
+#: as much as 32. The scores do not depend on the batch with one BLAS thread, as :func:`~estimators.diagnostics.diagnose.diagnose`
+#: runs (with more, the projection's product may differ in its last bit)
 GRID_BATCH = 32
 
 

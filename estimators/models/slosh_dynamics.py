@@ -165,12 +165,22 @@ LANES = 8
 
 @njit(cache=True)
 def _lane_forcing(twist: FloatArray, t_s: FloatArray, tank: FloatArray, forcing: FloatArray, lane: int) -> None:
-    """``forcing[:, :, lane]`` (T, 9) = :func:`tank_forcing` of every sample of ``twist`` (T, 6). Compiled apart from
-    :func:`integrate_slosh`, with Python's error model: a zero time step raises ``ZeroDivisionError``."""
+    """``forcing[:, :, lane]`` (T, 9) = :func:`tank_forcing` of every sample of ``twist`` (T, 6) (times checked by the
+    callers, :func:`check_times`: numba compiles a function called from a caller of numpy's error model with that
+    model, so a division by zero here gives inf, not an exception)."""
     one = np.empty((twist.shape[0], 9), dtype=forcing.dtype)
     for k in range(twist.shape[0]):
         tank_forcing(twist, t_s, tank, k, one)
     forcing[:, :, lane] = one
+
+
+@njit(cache=True)
+def check_times(t_s: FloatArray) -> None:
+    """Raise ``ValueError`` unless the times ``t_s`` (T,) increase strictly: the forcing's central differences divide
+    by their steps (:func:`tank_forcing`), and the kernels that use them run with numpy's error model."""
+    for k in range(1, t_s.shape[0]):
+        if not t_s[k] > t_s[k - 1]:
+            raise ValueError("slosh: the times must increase strictly")
 
 
 @njit(cache=True, inline="always")
@@ -256,7 +266,11 @@ def integrate_slosh(
 def slosh_momentum(twist: FloatArray, t_s: FloatArray, inputs: FloatArray, rod: bool) -> tuple[FloatArray, FloatArray]:
     """For P parameter sets: the slosh mass's relative momentum (P, T, 6) and the displaced parameters (P, T, 10)
     (:func:`integrate_slosh`, :data:`LANES` sets at a time), from the rest's twists (P, T, 6) and the inputs
-    (P, :data:`N_INPUTS`)."""
+    (P, :data:`N_INPUTS`).
+
+    Raises:
+        ValueError: times ``t_s`` that do not increase strictly (:func:`check_times`)."""
+    check_times(t_s)
     n_p, n_t = twist.shape[0], twist.shape[1]
     out = np.zeros((n_p, n_t, 6))
     moved = np.zeros((n_p, n_t, 10))

@@ -22,8 +22,8 @@ import numpy as np
 from numba import njit
 
 from estimators.models.momentum_model import _add_product, composite_inverse, twist_from_inverse
+from estimators.models.slosh_dynamics import check_times, frame_terms, slosh_outputs, tank_forcing
 from estimators.models.slosh_dynamics import cross3 as _cross
-from estimators.models.slosh_dynamics import frame_terms, slosh_outputs, tank_forcing
 from spaceid_gym.arrays import FloatArray
 
 
@@ -127,10 +127,11 @@ COMPLEX_STEP = 1e-30
 #: direction ``n`` and ``C n``
 _F, _ACC, _N, _CN = 0, 1, 2, 3
 
-#: the directions of :func:`slosh_tangents` integrated side by side (a lane each, in groups of this many)
-LANES = 4
+#: the directions of :func:`slosh_tangents` integrated side by side (a lane each, in groups of this many; the
+#: prediction's :data:`~estimators.models.slosh_dynamics.LANES` are parameter sets)
+DIRECTION_LANES = 4
 
-#: the rows of the directions' scratch of :func:`slosh_tangents` (one column per direction: everything a direction's
+#: the rows of the directions' scratch of :func:`slosh_tangents` (a lane per direction: everything a direction's
 #: tangent reads or writes in one array, as :func:`~estimators.models.slosh_dynamics.integrate_slosh` has its lanes,
 #: which lets the compiler vectorise the directions): the state's derivative (6), the RK4 stage's (6), the four
 #: slopes' (4 x 6), the forcing's at the step's start, middle and end (3 x 9), the coupling's (9, row-major), the rod
@@ -155,11 +156,12 @@ def _slope_tangent(
 ) -> None:
     """``slopes[s]`` = the slope of :func:`~estimators.models.slosh_dynamics.slosh_slope` at ``point`` (6,) for the forcing
     ``step[row]`` (9,) and the inputs (N_INPUTS,; their ``coupling`` (3, 3) and ``axis`` (3,) given), and in each
-    column of the directions' scratch ``d`` (:data:`N_DIRECTION_ROWS`, K) the slope's derivative (rows of slope ``s``)
-    from the point's (rows ``d_point`` to ``d_point + 6``), the forcing's, the coupling's, the axis's and the
-    oscillator's: the slope's forward-mode derivative written out (the spring, the frame's terms, the rod's restoring
-    force and tension), every direction alike (a direction along which the forcing and the coupling do not change has
-    zeros there, which add nothing). ``work`` (4, 3) is scratch (rows :data:`_F` to :data:`_CN`)."""
+    lane of the directions' scratch ``d`` (groups, :data:`N_DIRECTION_ROWS`, :data:`DIRECTION_LANES`) the slope's
+    derivative (rows of slope ``s``) from the point's (rows ``d_point``, an offset, to ``d_point + 6``), the forcing's,
+    the coupling's, the axis's and the oscillator's: the slope's forward-mode derivative written out (the spring, the
+    frame's terms, the rod's restoring force and tension), every direction alike (a direction along which the forcing
+    and the coupling do not change has zeros there, which add nothing where the state is finite). ``work`` (4, 3) is
+    scratch (rows :data:`_F` to :data:`_CN`)."""
     omega_n, zeta, kappa = inputs[4], inputs[5], inputs[6]
     stiff, damp = omega_n * omega_n, 2.0 * zeta * omega_n
     wx, wy, wz = step[row, 3], step[row, 4], step[row, 5]
@@ -204,7 +206,7 @@ def _slope_tangent(
     cn0, cn1, cn2 = work[_CN, 0], work[_CN, 1], work[_CN, 2]
     o, r, cc = D_SLOPES + 6 * s, D_STEP + 9 * row, D_COUPLING
     for g in range(d.shape[0]):
-        for q in range(LANES):
+        for q in range(DIRECTION_LANES):
             dx0, dx1, dx2 = d[g, d_point, q], d[g, d_point + 1, q], d[g, d_point + 2, q]
             dv0, dv1, dv2 = d[g, d_point + 3, q], d[g, d_point + 4, q], d[g, d_point + 5, q]
             d_stiff, d_damp, d_kappa = d[g, D_OSCILLATOR, q], d[g, D_OSCILLATOR + 1, q], d[g, D_OSCILLATOR + 2, q]
@@ -277,20 +279,22 @@ def slosh_tangents(
     derivatives by complex steps.
 
     Raises:
-        ZeroDivisionError: the rod's tension has a zero divisor ``n.C n`` (as the prediction's integration does)."""
+        ZeroDivisionError: the rod's tension has a zero divisor ``n.C n`` (as the prediction's integration does).
+        ValueError: times ``t_s`` that do not increase strictly (the forcing's differences would divide by zero)."""
     n_k, n_t = d_twist.shape[0], twist.shape[0]
+    check_times(t_s)
     h = COMPLEX_STEP
     tank, mass, coupling, axis = inputs[0:3], inputs[3], inputs[7:16].reshape(3, 3), inputs[16:19]
     work = np.empty((4, 3))
-    n_groups = (n_k + LANES - 1) // LANES  # the directions in groups of LANES, the last padded with zero directions
-    forcing, d_forcing = np.empty((n_t, 9)), np.zeros((n_t, n_groups, 9, LANES))
+    n_groups = (n_k + DIRECTION_LANES - 1) // DIRECTION_LANES  # in groups of lanes, the last padded with zero directions
+    forcing, d_forcing = np.empty((n_t, 9)), np.zeros((n_t, n_groups, 9, DIRECTION_LANES))
     c_forcing = np.empty((n_t, 9), dtype=np.complex128)
     for k in range(n_t):
         tank_forcing(twist, t_s, tank, k, forcing)
     omega_n, zeta = inputs[4], inputs[5]
-    d = np.zeros((n_groups, N_DIRECTION_ROWS, LANES))
+    d = np.zeros((n_groups, N_DIRECTION_ROWS, DIRECTION_LANES))
     for direction in range(n_k):
-        g, q = direction // LANES, direction % LANES
+        g, q = direction // DIRECTION_LANES, direction % DIRECTION_LANES
         for i in range(9):
             d[g, D_COUPLING + i, q] = d_inputs[direction, 7 + i]
         for i in range(3):
@@ -314,7 +318,7 @@ def slosh_tangents(
             step[1, i] = 0.5 * (step[0, i] + step[2, i])
         for g in range(n_groups):
             for i in range(9):
-                for q in range(LANES):
+                for q in range(DIRECTION_LANES):
                     d[g, D_STEP + i, q], d[g, D_STEP + 18 + i, q] = d_forcing[k - 1, g, i, q], d_forcing[k, g, i, q]
                     d[g, D_STEP + 9 + i, q] = 0.5 * (d[g, D_STEP + i, q] + d[g, D_STEP + 18 + i, q])
         for s in range(4):  # RK4 stages: the step's start, its middle twice, its end
@@ -324,7 +328,7 @@ def slosh_tangents(
                     stage[i] = state[i] + fraction * dt * slopes[s - 1, i]
                 for g in range(n_groups):
                     for i in range(6):
-                        for q in range(LANES):
+                        for q in range(DIRECTION_LANES):
                             d[g, D_STAGE + i, q] = d[g, D_STATE + i, q] + fraction * dt * d[g, D_SLOPES + 6 * (s - 1) + i, q]
             row = 0 if s == 0 else (1 if s < 3 else 2)
             _slope_tangent(state if s == 0 else stage, step, row, inputs, coupling, axis, rod, slopes, s, work, d,
@@ -334,7 +338,7 @@ def slosh_tangents(
             states[k, i] = state[i]
         for g in range(n_groups):
             for i in range(6):
-                for q in range(LANES):
+                for q in range(DIRECTION_LANES):
                     d[g, D_STATE + i, q] += (dt / 6.0) * (
                         d[g, D_SLOPES + i, q]
                         + 2.0 * d[g, D_SLOPES + 6 + i, q]
@@ -343,7 +347,7 @@ def slosh_tangents(
                     )
         for direction in range(n_k):
             for i in range(6):
-                d_states[direction, k, i] = d[direction // LANES, D_STATE + i, direction % LANES]
+                d_states[direction, k, i] = d[direction // DIRECTION_LANES, D_STATE + i, direction % DIRECTION_LANES]
     out, moved = np.zeros((n_t, 6)), np.zeros((n_t, 10))
     slosh_outputs(states, tank, mass, out, moved)
     d_out, d_moved = np.zeros((n_k, n_t, 6)), np.zeros((n_k, n_t, 10))
