@@ -55,7 +55,12 @@ from scipy.optimize import minimize_scalar
 from scipy.spatial.transform import Rotation
 from scipy.special import expit
 
-from estimators.attitude_integration import fourth_order_increments, midpoint_log, midpoint_step_map, relative_attitudes
+from estimators.attitude_integration import (
+    fourth_order_increments,
+    midpoint_step_map,
+    relative_attitudes,
+    shared_midpoint_log,
+)
 from estimators.attitude_noise import AttitudeNoise, fit_attitude_noise
 from estimators.attitude_propagation import (
     EncoderPropagation,
@@ -223,9 +228,10 @@ def fit_first_order_coupling(
     best = int(np.argmin(scan))
     low, high = GAIN_LOGITS[max(best - 1, 0)], GAIN_LOGITS[min(best + 1, len(GAIN_LOGITS) - 1)]
     logit = float(minimize_scalar(objective, bounds=(low, high), method="bounded").x)
-    if objective(logit) > scan[best]:
-        logit = float(GAIN_LOGITS[best])
-    return first_order_coupling(float(expit(logit)), dt_s), objective(logit)
+    value = objective(logit)
+    if value > scan[best]:
+        logit, value = float(GAIN_LOGITS[best]), scan[best]
+    return first_order_coupling(float(expit(logit)), dt_s), value
 
 
 def choose_gyro_coupling(differences: FloatArray, gyro_steps: FloatArray, sensor_steps: FloatArray, dt_s: float) -> GyroCoupling:
@@ -290,18 +296,6 @@ def _sum_free(design: FloatArray) -> FloatArray:
     return design[:, :-1] - design[:, -1:]
 
 
-#: the midpoint log of each log (:func:`midpoint_log`), made once and shared by every model's channel on it
-_MIDPOINT_LOGS: weakref.WeakKeyDictionary[MeasurementLog, MeasurementLog] = weakref.WeakKeyDictionary()
-
-
-def _shared_midpoint_log(log: MeasurementLog) -> MeasurementLog:
-    """:func:`midpoint_log` of ``log``, made once per log (logs are read-only)."""
-    midpoint = _MIDPOINT_LOGS.get(log)
-    if midpoint is None:
-        midpoint = _MIDPOINT_LOGS[log] = midpoint_log(log)
-    return midpoint
-
-
 def reference_theta(model: IdentificationModel, reference: FloatArray | None) -> FloatArray:
     """The unknowns (k,) of ``model`` at which a channel takes its integration error out: ``reference`` (the first
     unknowns, e.g. a baseline's fit, whose model ``model`` extends) followed by ``model``'s nominal (its added effects
@@ -350,7 +344,7 @@ class AttitudeChannel:
     """The star tracker's rotation against the model's on one log (see the module docstring).
 
     Args:
-        problem: the model bound to the log's midpoint samples (:func:`midpoint_log`), any object with
+        problem: the model bound to the log's midpoint samples (:func:`~estimators.attitude_integration.midpoint_log`), any object with
             ``base_rate(theta (P, k)) -> (P, T, 3)`` and ``base_rate_jacobian(theta (k,)) -> (3T, k)``.
         log: the log itself, with attitude quaternions.
         coupling: the attitude's response to the gyro's residual (:class:`GyroCoupling`), or
@@ -402,7 +396,7 @@ class AttitudeChannel:
         and reference (whatever effects their models add) compare the attitude alike."""
         if log.quat_base_to_inertial_wxyz is None or log.n_samples < 3:
             return None
-        channel = cls(model.problem(_shared_midpoint_log(log)), log, coupling)
+        channel = cls(model.problem(shared_midpoint_log(log)), log, coupling)
         theta = reference_theta(model, reference)
         n_reference = len(theta) if reference is None else len(reference)
         # carried to first order in the base's unknowns (the effects' at the reference as they are, added ones off)

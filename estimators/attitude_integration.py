@@ -26,6 +26,7 @@ unknowns, and carries it to first order: from 20 kg off the reference it still l
 from __future__ import annotations
 
 import math
+import weakref
 
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
@@ -92,6 +93,20 @@ def midpoint_log(log: MeasurementLog) -> MeasurementLog:
         np.diff(q, axis=0) / np.diff(t)[:, None],
         0.5 * (omega[:-1] + omega[1:]),
     )
+
+
+#: the midpoint log of each log (:func:`midpoint_log`), made once and shared by every model's attitude channel and the
+#: encoders' noise propagation on it
+_MIDPOINT_LOGS: weakref.WeakKeyDictionary[MeasurementLog, MeasurementLog] = weakref.WeakKeyDictionary()
+
+
+def shared_midpoint_log(log: MeasurementLog) -> MeasurementLog:
+    """:func:`midpoint_log` of ``log``, made once per log (logs are read-only), so that the momentum models built on it
+    are shared too."""
+    midpoint = _MIDPOINT_LOGS.get(log)
+    if midpoint is None:
+        midpoint = _MIDPOINT_LOGS[log] = midpoint_log(log)
+    return midpoint
 
 
 def encoder_tangents(t_s: FloatArray, q_rad: FloatArray) -> FloatArray:

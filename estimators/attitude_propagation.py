@@ -43,7 +43,7 @@ import numpy as np
 from numba import njit
 from scipy.optimize import minimize
 
-from estimators.attitude_integration import midpoint_log, midpoint_step_map, relative_attitudes
+from estimators.attitude_integration import midpoint_step_map, relative_attitudes, shared_midpoint_log
 from estimators.problem import IdentificationModel
 from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
@@ -170,13 +170,14 @@ def encoder_propagation(model: IdentificationModel, log: MeasurementLog, theta: 
 
 
 def _moved_logs(log: MeasurementLog) -> tuple[MeasurementLog, dict[tuple[str, int], MeasurementLog]]:
-    """The midpoint log of ``log`` and its copies with one joint's angles (``"q_rad"``) or rates (``"dq_rad_s"``) moved by
+    """The midpoint log of ``log`` (:func:`~estimators.attitude_integration.shared_midpoint_log`, the attitude channel's
+    own) and its copies with one joint's angles (``"q_rad"``) or rates (``"dq_rad_s"``) moved by
     :data:`ANGLE_STEP_RAD` or :data:`RATE_STEP_RAD_S` from the second sample on, by (array, joint); made once per log
     (logs are read-only), so that the momentum models built on them are shared too: a diagnosis propagates the
     encoders' noise at two references at least, and each angle-moved log's model costs a pass of the arm's dynamics."""
     made = _MOVED_LOGS.get(log)
     if made is None:
-        mid = midpoint_log(log)
+        mid = shared_midpoint_log(log)
         moved_logs = {}
         for joint in range(mid.q_rad.shape[1]):
             for array, step in (("q_rad", ANGLE_STEP_RAD), ("dq_rad_s", RATE_STEP_RAD_S)):
