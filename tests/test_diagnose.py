@@ -30,6 +30,7 @@ from estimators.diagnostics.suite import DIAGNOSTIC_EXCITATION
 from estimators.diagnostics.verdict import _prefer_encompassing, _score, rivals
 from estimators.diagnostics.workflow import bound_model, parameter_errors, run_loop, true_parameters, write_report
 from estimators.estimate import Estimate
+from estimators.least_squares import interior_start
 from estimators.problem import IdentificationModel
 from estimators.registry import make_estimator
 from spaceid_gym.arrays import FloatArray
@@ -335,6 +336,22 @@ def test_a_fit_beyond_the_liquid_left_is_reported_as_that_liquid(short_fuel_epis
     # a local fit from there ends inside what can move, whichever way it goes
     fit = fit_model(model, ep.log, starts=[beyond], effect="slosh")[0]
     assert fit.theta[4] <= float(term.liquid_of(fit.theta[None, :4])[0]) and fit.plausible
+
+
+def test_a_repeated_start_is_polished_once(short_fuel_episode) -> None:
+    """A polish is deterministic: a start given twice (a candidate whose grid is its nominal alone offers the
+    baseline twice) reaches the same point again, so ``fit_model`` polishes it once; the fit is the same."""
+    ep = short_fuel_episode
+    model = IdentificationModel(ep.robot, "fuel")
+    nominal = model.problem(ep.log).parameters.nominal
+    a, b = nominal.copy(), interior_start(model.problem(ep.log).parameters)
+    fits, evaluations = [], []
+    for starts in ([a, b], [a, a.copy(), b, b.copy()]):
+        problem = model.problem(ep.log)
+        fits.append(fit_model(model, ep.log, starts=starts, problem=problem)[0])
+        evaluations.append(problem.n_evaluations)
+    np.testing.assert_array_equal(fits[0].theta, fits[1].theta)
+    assert evaluations[0] == evaluations[1] > 0
 
 
 def _estimate_off_the_truth(model: IdentificationModel, ep: Any, mdf_factor: float) -> tuple[FloatArray, Estimate]:

@@ -241,6 +241,7 @@ def fit_model(
         if not starts:
             raise SpaceIdInputError("fit_model: give an estimator or at least one start")
         polish = LevenbergMarquardt(max_iterations=MAX_ITERATIONS, ftol=step_ftol(3 * problem.n_samples))
+        starts = distinct_starts(starts)
         results = [polish.polish(problem, start).theta for start in starts]
         basins = distinct_minima(problem, results) if each_basin and channel is not None else []
         if len(basins) > 1:
@@ -378,6 +379,16 @@ def joint_objective(fit: ModelFit, weights: ChannelWeights) -> float:
 #: 0.01 % of the width, the two basins differed by 85 % in the tank's x; a looser value merges what the restart is
 #: for, a tighter one refines the same basin again (each refinement costs a joint fit)
 SAME_MINIMUM_WIDTH = 0.02
+
+
+def distinct_starts(starts: list[FloatArray]) -> list[FloatArray]:
+    """``starts`` (each (k,)) without exact repeats, in their order: a polish is deterministic, so a repeated start
+    reaches the same point again (a candidate whose grid is its nominal alone offers the baseline twice)."""
+    kept: list[FloatArray] = []
+    for start in starts:
+        if not any(np.array_equal(start, k) for k in kept):
+            kept.append(start)
+    return kept
 
 
 def distinct_minima(problem: IdentificationProblem, minima: list[FloatArray]) -> list[FloatArray]:
