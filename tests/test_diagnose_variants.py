@@ -5,11 +5,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from estimators.diagnostics.diagnose import CANDIDATE_VARIANTS, diagnose, simulated_variant
+from estimators.diagnostics.diagnose import CANDIDATE_VARIANTS, _fit_candidate, diagnose, simulated_variant
+from estimators.diagnostics.model_fit import GRID_STARTS, best_of_grid, fit_model, nuisance_basis
 from estimators.diagnostics.power import candidate_spec, effect_dof
 from estimators.diagnostics.suite import DIAGNOSTIC_EXCITATION
 from estimators.diagnostics.workflow import apply_effect, parameter_errors
 from estimators.models.effect_models import make_terms
+from estimators.models.mass_effects import Slosh
 from estimators.problem import IdentificationModel
 from spaceid_gym.datasets import simulate_episode
 from spaceid_gym.envs import FreeFloatingIDEnv
@@ -51,6 +53,34 @@ def test_the_torque_and_slosh_terms_say_which_truth_they_made(paper6: Robot) -> 
     (back,) = constant.grid_from_variant(np.arange(1.0, 10.0))
     np.testing.assert_array_equal(back, fitted)
     assert CANDIDATE_VARIANTS["external_torque"] == ("external_torque", "external_torque[drift=true]")
+
+
+def test_the_pendulum_scans_its_rod_at_the_spring_masss_best_points(short_fuel_episode, monkeypatch) -> None:
+    """The spring-mass has the pendulum's small lateral motions, so its scan ranks masses and frequencies as the
+    pendulum's would: the pendulum scans its rod's direction (seven axes, straight) at the spring's best scanned points,
+    with its candidates from the spring's fit (thirteen axes), instead of its own scan of every axis at every point."""
+    ep = short_fuel_episode
+    model = IdentificationModel(ep.robot, "fuel")
+    baseline = fit_model(model, ep.log, starts=[model.problem(ep.log).parameters.nominal])[0]
+    basis = nuisance_basis(model.problem(ep.log), baseline.theta, None, None)
+    scans: list[list[np.ndarray]] = []
+
+    def recorded(problem, grid, *args):  # type: ignore[no-untyped-def]
+        scans.append(grid)
+        return best_of_grid(problem, grid, *args)
+
+    monkeypatch.setattr("estimators.diagnostics.diagnose.best_of_grid", recorded)
+    spring = _fit_candidate(model, ep.log, "slosh", baseline, None, None, basis)
+    _fit_candidate(model, ep.log, "slosh[model=pendulum]", baseline, None, None, basis, [spring])
+    n_grid = len(Slosh.GRID_FREQUENCIES_HZ) * len(Slosh.GRID_MASS_FRACTIONS)
+    assert [len(scan) for scan in scans] == [n_grid, GRID_STARTS * len(Slosh.GRID_AXES) + len(Slosh.FINE_AXES)]
+    assert len(spring.scanned) == GRID_STARTS
+    k0 = len(baseline.theta)
+    expected = [np.concatenate((p[:k0], p[k0:], axis, [0.0])) for p in spring.scanned for axis in Slosh.GRID_AXES]
+    expected += [np.concatenate((spring.theta[:k0], spring.theta[k0:], axis, [0.0])) for axis in Slosh.FINE_AXES]
+    np.testing.assert_array_equal(np.array(scans[1]), np.array(expected))
+    (spring_term,) = make_terms("slosh", ep.robot)
+    assert spring_term.grid_from_scan(spring.scanned[0][k0:]) == []
 
 
 def test_the_power_tests_the_model_that_made_the_effect(paper6: Robot) -> None:

@@ -587,7 +587,9 @@ def _fit_candidate(
     """``model`` with the effect ``spec`` added, fitted from the baseline's fit, from the best of the term's grid and
     once from the default start (a missing effect can drag the baseline far off). The grid includes the term's
     candidates from the fits of the ``other_variants`` (:meth:`~estimators.models.effect_base.EffectTerm.grid_from_variant`:
-    a slosh pendulum from the spring-mass's fit, the rod along each of a finer set of axes). The grid is scored with
+    a slosh pendulum from the spring-mass's fit, the rod along each of a finer set of axes), and its scan is read from
+    theirs where the term can (:meth:`~estimators.models.effect_base.EffectTerm.grid_from_scan`: the pendulum's rod
+    along each of seven axes at the spring-mass's best scanned masses and frequencies). The grid is scored with
     the model's own unknowns profiled out to first order on ``basis`` (:func:`~estimators.diagnostics.model_fit.nuisance_basis`
     at the baseline)."""
     extended = candidate_model(model, spec)
@@ -597,20 +599,25 @@ def _fit_candidate(
     restart = interior_start(params)[: len(baseline.theta)]
     k_base = params.base.n_params
     problem = extended.problem(log)
-    grid = [np.concatenate((baseline.theta, s)) for s in term.grid(baseline.theta[:k_base])]
+    n0 = len(baseline.theta)  # the model's own unknowns (base and effects already in it), then the candidate's
+    # another variant's scan stands for this term's own where the term reads candidates from it
+    grid = [np.concatenate((p[:n0], s)) for v in other_variants for p in v.scanned for s in term.grid_from_scan(p[n0:])]
+    if not grid:
+        grid = [np.concatenate((baseline.theta, s)) for s in term.grid(baseline.theta[:k_base])]
     if not grid:
         # the term cannot act at the baseline (a missing slosh can drag it to the fuel bound: no liquid left): the scan
         # at points on the way from the baseline to the interior start instead
         for share in SCAN_SHARES_TOWARD_INTERIOR:
             point = baseline.theta + share * (restart - baseline.theta)
             grid += [np.concatenate((point, s)) for s in term.grid(point[:k_base])]
-    n0 = len(baseline.theta)  # the model's own unknowns (base and effects already in it), then the candidate's
     grid += [np.concatenate((v.theta[:n0], s)) for v in other_variants for s in term.grid_from_variant(v.theta[n0:])]
     extended_channel = None if channel is None else AttitudeChannel.of(extended, log, channel.coupling, channel.reference)
-    starts = best_of_grid(problem, grid, extended_channel, weights, basis)
-    starts.append(np.concatenate((restart, term.starts(restart[:k_base])[0])))
+    scanned = best_of_grid(problem, grid, extended_channel, weights, basis)
+    starts = [*scanned, np.concatenate((restart, term.starts(restart[:k_base])[0]))]
     starts.append(np.concatenate((baseline.theta, term.nominal)))  # the baseline itself: the nested model's fit
-    return fit_model(extended, log, starts=starts, effect=term.name, weights=weights, problem=problem, profile_noise=True)[0]
+    fit = fit_model(extended, log, starts=starts, effect=term.name, weights=weights, problem=problem, profile_noise=True)[0]
+    fit.scanned = scanned
+    return fit
 
 
 def _analyse_fit(

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -137,6 +137,8 @@ class ModelFit(CandidateScores):
         attitude_white_p: p-value of the attitude residual, whitened by its error model, against unit white noise in
             the effects' band (:func:`low_frequency_p_value`): small when the attitude source's errors are not what
             the model assumes (``nan``: no attitude).
+        scanned: the best points (each (k,)) of the candidate's scan (:func:`best_of_grid`), which started its fit
+            (empty for a fit without a scan).
     """
 
     effects: tuple[str, ...]
@@ -156,6 +158,7 @@ class ModelFit(CandidateScores):
     attitude_white_p: float = math.nan  # the whitened attitude residual's low-frequency test (:func:`low_frequency_p_value`)
     attitude_noise: ErrorModel | None = None  # the attitude error model refitted at this fit
     attitude_chi2_held: float | None = None  # the attitude chi-square under the weights' error model, held
+    scanned: list[FloatArray] = field(default_factory=list)  # the best points of the candidate's scan, which started its fit
 
     @property
     def residual_rms_rad_s(self) -> float:
