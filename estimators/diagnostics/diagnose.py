@@ -532,6 +532,7 @@ def _better_of_refit(
     )[0]
     better = refit if _chi2(refit, white_std * white_std) < _chi2(fit, white_std * white_std) else fit
     better.wall_time_s = fit.wall_time_s + refit.wall_time_s
+    better.scanned = fit.scanned
     return better
 
 
@@ -616,7 +617,7 @@ def _fit_candidate(
     starts = [*scanned, np.concatenate((restart, term.starts(restart[:k_base])[0]))]
     starts.append(np.concatenate((baseline.theta, term.nominal)))  # the baseline itself: the nested model's fit
     fit = fit_model(extended, log, starts=starts, effect=term.name, weights=weights, problem=problem, profile_noise=True)[0]
-    fit.scanned = scanned
+    fit.scanned = [p.copy() for p in scanned]  # not views of the whole scan
     return fit
 
 

@@ -138,7 +138,7 @@ class ModelFit(CandidateScores):
             the effects' band (:func:`low_frequency_p_value`): small when the attitude source's errors are not what
             the model assumes (``nan``: no attitude).
         scanned: the best points (each (k,)) of the candidate's scan (:func:`best_of_grid`), which started its fit
-            (empty for a fit without a scan).
+            (empty for a fit without a scan); a refit of the candidate keeps its first fit's.
     """
 
     effects: tuple[str, ...]
@@ -606,10 +606,10 @@ def independent_attitude_channel(
 #: how many of a term's grid candidates (:meth:`~estimators.models.effect_models.EffectTerm.grid`) start local fits
 GRID_STARTS = 3
 
-#: candidates per batched evaluation of a grid (:func:`best_of_grid`): a slosh scan's 412 at once, on a 60 s log at
-#: 50 Hz, allocate arrays of 100 MB and cost 1.5 times as much as in batches of 64; batches of 32 cost 0.61-0.74 times
-#: what batches of 64 do (the pendulum's scan on the benchmark's log, ``benchmarks/diagnose_speed.py``), of 16 about
-#: as much as 32. The scores do not depend on the batch with one BLAS thread, as :func:`~estimators.diagnostics.diagnose.diagnose`
+#: candidates per batched evaluation of a grid (:func:`best_of_grid`): measured when the pendulum scanned 412 of its own
+#: (before it read its scan from the spring-mass's): all at once, on a 60 s log at 50 Hz, they allocated arrays of
+#: 100 MB and cost 1.5 times as much as in batches of 64; batches of 32 cost 0.61-0.74 times what batches of 64 did
+#: (on the benchmark's log, ``benchmarks/diagnose_speed.py``), of 16 about as much as 32. The scores do not depend on the batch with one BLAS thread, as :func:`~estimators.diagnostics.diagnose.diagnose`
 #: runs (with more, the projection's product may differ in its last bit)
 GRID_BATCH = 32
 
