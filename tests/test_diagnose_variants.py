@@ -3,9 +3,18 @@ each variant says which simulated effect it made (the bound of the fuel errors i
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
-from estimators.diagnostics.diagnose import CANDIDATE_VARIANTS, _fit_candidate, diagnose, simulated_variant
+from estimators.diagnostics.diagnose import (
+    CANDIDATE_VARIANTS,
+    SCAN_SHARES_TOWARD_INTERIOR,
+    _fit_candidate,
+    candidate_model,
+    diagnose,
+    simulated_variant,
+)
 from estimators.diagnostics.model_fit import GRID_STARTS, best_of_grid, fit_model, nuisance_basis
 from estimators.diagnostics.power import candidate_spec, effect_dof
 from estimators.diagnostics.suite import DIAGNOSTIC_EXCITATION
@@ -81,6 +90,34 @@ def test_the_pendulum_scans_its_rod_at_the_spring_masss_best_points(short_fuel_e
     np.testing.assert_array_equal(np.array(scans[1]), np.array(expected))
     (spring_term,) = make_terms("slosh", ep.robot)
     assert spring_term.grid_from_scan(spring.scanned[0][k0:]) == []
+
+
+def test_with_no_liquid_left_the_pendulum_scans_where_the_spring_mass_did(short_fuel_episode, monkeypatch) -> None:
+    """A baseline with all the usable fuel consumed leaves no liquid to slosh: the spring-mass scans at points on the
+    way to the interior start instead, and the pendulum's rods are scanned at those points' own base unknowns, not at
+    the baseline's."""
+    ep = short_fuel_episode
+    model = IdentificationModel(ep.robot, "fuel")
+    problem = model.problem(ep.log)
+    empty = problem.parameters.nominal.copy()
+    empty[0] = problem.parameters.upper[0]  # the fuel consumed at its bound: the usable fuel
+    baseline = dataclasses.replace(fit_model(model, ep.log, starts=[empty])[0], theta=empty)
+    basis = nuisance_basis(problem, baseline.theta, None, None)
+    scans: list[list[np.ndarray]] = []
+
+    def recorded(problem, grid, *args):  # type: ignore[no-untyped-def]
+        scans.append(grid)
+        return best_of_grid(problem, grid, *args)
+
+    monkeypatch.setattr("estimators.diagnostics.diagnose.best_of_grid", recorded)
+    spring = _fit_candidate(model, ep.log, "slosh", baseline, None, None, basis)
+    _fit_candidate(model, ep.log, "slosh[model=pendulum]", baseline, None, None, basis, [spring])
+    spring_term = candidate_model(model, "slosh").parameters.terms[-1]  # type: ignore[attr-defined]
+    assert spring_term.grid(empty) == [] and len(scans[0]) == len(SCAN_SHARES_TOWARD_INTERIOR) * len(spring_term.grid())
+    k0 = len(empty)
+    assert all(not np.array_equal(p[:k0], empty) for p in spring.scanned)
+    expected = [np.concatenate((p, axis, [0.0])) for p in spring.scanned for axis in Slosh.GRID_AXES]
+    np.testing.assert_array_equal(np.array(scans[1][: len(expected)]), np.array(expected))
 
 
 def test_the_power_tests_the_model_that_made_the_effect(paper6: Robot) -> None:
