@@ -15,7 +15,7 @@ from estimators.diagnostics.diagnose import (
     diagnose,
     simulated_variant,
 )
-from estimators.diagnostics.model_fit import GRID_STARTS, best_of_grid, fit_model, nuisance_basis
+from estimators.diagnostics.model_fit import GRID_STARTS, ModelFit, best_of_grid, fit_model, nuisance_basis
 from estimators.diagnostics.power import candidate_spec, effect_dof
 from estimators.diagnostics.suite import DIAGNOSTIC_EXCITATION
 from estimators.diagnostics.workflow import apply_effect, parameter_errors
@@ -64,14 +64,11 @@ def test_the_torque_and_slosh_terms_say_which_truth_they_made(paper6: Robot) -> 
     assert CANDIDATE_VARIANTS["external_torque"] == ("external_torque", "external_torque[drift=true]")
 
 
-def test_the_pendulum_scans_its_rod_at_the_spring_masss_best_points(short_fuel_episode, monkeypatch) -> None:
-    """The spring-mass has the pendulum's small lateral motions, so its scan ranks masses and frequencies as the
-    pendulum's would: the pendulum scans its rod's direction (seven axes, straight) at the spring's best scanned points,
-    with its candidates from the spring's fit (thirteen axes), instead of its own scan of every axis at every point."""
-    ep = short_fuel_episode
-    model = IdentificationModel(ep.robot, "fuel")
-    baseline = fit_model(model, ep.log, starts=[model.problem(ep.log).parameters.nominal])[0]
-    basis = nuisance_basis(model.problem(ep.log), baseline.theta, None, None)
+def _slosh_scans(model: IdentificationModel, log, theta: np.ndarray, monkeypatch) -> tuple[ModelFit, list[list[np.ndarray]]]:  # type: ignore[no-untyped-def]
+    """The spring-mass and then the pendulum fitted by ``_fit_candidate`` from a baseline at ``theta`` (gyro alone):
+    the spring's fit and the two scans (every candidate each scored)."""
+    baseline = dataclasses.replace(fit_model(model, log, starts=[theta])[0], theta=theta)
+    basis = nuisance_basis(model.problem(log), baseline.theta, None, None)
     scans: list[list[np.ndarray]] = []
 
     def recorded(problem, grid, *args):  # type: ignore[no-untyped-def]
@@ -79,12 +76,24 @@ def test_the_pendulum_scans_its_rod_at_the_spring_masss_best_points(short_fuel_e
         return best_of_grid(problem, grid, *args)
 
     monkeypatch.setattr("estimators.diagnostics.diagnose.best_of_grid", recorded)
-    spring = _fit_candidate(model, ep.log, "slosh", baseline, None, None, basis)
-    _fit_candidate(model, ep.log, "slosh[model=pendulum]", baseline, None, None, basis, [spring])
+    spring = _fit_candidate(model, log, "slosh", baseline, None, None, basis)
+    _fit_candidate(model, log, "slosh[model=pendulum]", baseline, None, None, basis, [spring])
+    return spring, scans
+
+
+def test_the_pendulum_scans_its_rod_at_the_spring_masss_best_points(short_fuel_episode, monkeypatch) -> None:
+    """The spring-mass has the pendulum's small lateral motions, so its scan ranks masses and frequencies as the
+    pendulum's would: the pendulum scans its rod's direction (seven axes, straight) at the spring's best scanned points,
+    with its candidates from the spring's fit (thirteen axes), instead of its own scan of every axis at every point."""
+    ep = short_fuel_episode
+    model = IdentificationModel(ep.robot, "fuel")
+    start = model.problem(ep.log).parameters.nominal
+    baseline_theta = fit_model(model, ep.log, starts=[start])[0].theta
+    spring, scans = _slosh_scans(model, ep.log, baseline_theta, monkeypatch)
     n_grid = len(Slosh.GRID_FREQUENCIES_HZ) * len(Slosh.GRID_MASS_FRACTIONS)
     assert [len(scan) for scan in scans] == [n_grid, GRID_STARTS * len(Slosh.GRID_AXES) + len(Slosh.FINE_AXES)]
     assert len(spring.scanned) == GRID_STARTS
-    k0 = len(baseline.theta)
+    k0 = len(baseline_theta)
     expected = [np.concatenate((p[:k0], p[k0:], axis, [0.0])) for p in spring.scanned for axis in Slosh.GRID_AXES]
     expected += [np.concatenate((spring.theta[:k0], spring.theta[k0:], axis, [0.0])) for axis in Slosh.FINE_AXES]
     np.testing.assert_array_equal(np.array(scans[1]), np.array(expected))
@@ -101,17 +110,7 @@ def test_with_no_liquid_left_the_pendulum_scans_where_the_spring_mass_did(short_
     problem = model.problem(ep.log)
     empty = problem.parameters.nominal.copy()
     empty[0] = problem.parameters.upper[0]  # the fuel consumed at its bound: the usable fuel
-    baseline = dataclasses.replace(fit_model(model, ep.log, starts=[empty])[0], theta=empty)
-    basis = nuisance_basis(problem, baseline.theta, None, None)
-    scans: list[list[np.ndarray]] = []
-
-    def recorded(problem, grid, *args):  # type: ignore[no-untyped-def]
-        scans.append(grid)
-        return best_of_grid(problem, grid, *args)
-
-    monkeypatch.setattr("estimators.diagnostics.diagnose.best_of_grid", recorded)
-    spring = _fit_candidate(model, ep.log, "slosh", baseline, None, None, basis)
-    _fit_candidate(model, ep.log, "slosh[model=pendulum]", baseline, None, None, basis, [spring])
+    spring, scans = _slosh_scans(model, ep.log, empty, monkeypatch)
     spring_term = candidate_model(model, "slosh").parameters.terms[-1]  # type: ignore[attr-defined]
     assert spring_term.grid(empty) == [] and len(scans[0]) == len(SCAN_SHARES_TOWARD_INTERIOR) * len(spring_term.grid())
     k0 = len(empty)
