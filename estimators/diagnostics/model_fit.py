@@ -609,8 +609,9 @@ GRID_STARTS = 3
 #: candidates per batched evaluation of a grid (:func:`best_of_grid`): measured when the pendulum scanned 412 of its own
 #: (before it read its scan from the spring-mass's): all at once, on a 60 s log at 50 Hz, they allocated arrays of
 #: 100 MB and cost 1.5 times as much as in batches of 64; batches of 32 cost 0.61-0.74 times what batches of 64 did
-#: (on the benchmark's log, ``benchmarks/diagnose_speed.py``), of 16 about as much as 32. The scores do not depend on the batch with one BLAS thread, as :func:`~estimators.diagnostics.diagnose.diagnose`
-#: runs (with more, the projection's product may differ in its last bit)
+#: (on the benchmark's log, ``benchmarks/diagnose_speed.py``), of 16 about as much as 32. The scores do not depend on
+#: the batch with one BLAS thread, as :func:`~estimators.diagnostics.diagnose.diagnose` runs (with more, the
+#: projection's product may differ in its last bit)
 GRID_BATCH = 32
 
 

@@ -300,9 +300,9 @@ class Slosh(EffectTerm):
         """The pendulum's candidates (6,) with the mass, frequency and damping of ``scanned`` (a best point of the
         spring-mass's scan, which has the pendulum's small lateral motions and so ranks the scan's masses and
         frequencies as the pendulum's own would) and a straight rod along each of :data:`GRID_AXES`; none for the
-        spring. They replace the pendulum's own scan (:meth:`grid`), 19 times as many candidates (its whole grid 412
-        against 34 with the 13 of :meth:`grid_from_variant`): on 20 design logs
-        with a pendulum slosh (seeds 10481-10541, 20-100 Hz, every attitude source) the pendulum's fit from them was
+        spring. They replace the pendulum's own scan (:meth:`grid`), which has 19 times as many (the pendulum's whole
+        grid, with the 13 of :meth:`grid_from_variant`, 34 candidates instead of 412): on 20 design logs with a
+        pendulum slosh (seeds 10481-10541, 20-100 Hz, every attitude source) the pendulum's fit from them was
         the one from its own scan to 1e-4 units of ``-2 log L``, on one 0.06 units better; on a payload log (10549)
         the pendulum's fit of the payload's motion ended 9.7 units worse, and the payload was named as before."""
         return self._rods(scanned, self.GRID_AXES)
