@@ -79,7 +79,7 @@ from threadpoolctl import threadpool_limits
 
 from estimators.attitude_channel import AttitudeChannel
 from estimators.base import Estimator
-from estimators.diagnostics.baseline import profiled_baseline, rereferenced
+from estimators.diagnostics.baseline import profiled_baseline, rereferenced, scanned_baseline
 from estimators.diagnostics.model_fit import EXPLAINED_FRACTION as EXPLAINED_FRACTION
 from estimators.diagnostics.model_fit import (
     MIN_STEP_GAIN_CHI2,
@@ -336,6 +336,7 @@ def _diagnose(
         weights = ChannelWeights(
             white_std, channel.estimate_noise(baseline.theta), channel.coupling, channel.reference, channel.axes
         )
+        baseline = scanned_baseline(model, log, baseline, weights, channel)
         baseline, weights = profiled_baseline(model, log, baseline, weights, channel)
         channel, baseline, weights = rereferenced(model, log, baseline, weights, channel)
         # the baseline's own error model weights every candidate's fit and is the reference of the log-determinants
