@@ -124,6 +124,18 @@ def test_the_baseline_is_restarted_from_the_candidate_that_fits_the_model_as_giv
     closer = _fit_at([20.0, 0.2, 0.01, 0.0, 1.0], "gyro_bias", (*names, "bias_x"))
     start = _better_baseline_start(problem, baseline, [close, closer], value)
     assert start is not None and start[0] == "gyro_bias"
+    # the largest gain, whatever the order
+    assert (_better_baseline_start(problem, baseline, [closer, close], value) or ("",))[0] == "gyro_bias"
+    # a gain of at most a twentieth of a unit is none
+    # 0.0401 against the baseline's 0.0441: a gain of 0.004
+    barely = _fit_at([20.0, 0.2, 0.01, 0.2], "delay", (*names, "delay_s"))
+    assert _better_baseline_start(problem, _fit_at([20.0, 0.2, 0.0, 0.21], None, names), [barely], value) is None
+    # a candidate's point outside the box is clipped into it
+    upper = problem.parameters.upper
+    outside = _fit_at([float(upper[0]) + 5.0, 0.2, 0.0, 0.0, 1.0], "delay", (*names, "delay_s"))
+    far = _fit_at([float(upper[0]) + 50.0, 0.2, 0.0, 0.0], None, names)
+    clipped = _better_baseline_start(problem, far, [outside], lambda theta: float(abs(theta[0] - upper[0] - 5.0)))
+    assert clipped is not None and clipped[1][0] == upper[0]
     assert np.array_equal(start[1], [20.0, 0.2, 0.01, 0.0]) and start[2] == pytest.approx(value(baseline.theta) - 1e-4)
     at_best = _fit_at([20.0, 0.2, 0.01, 0.0], None, names)
     assert _better_baseline_start(problem, at_best, [baseline, close, closer], value) is None
@@ -149,7 +161,7 @@ def test_a_gyro_basin_far_from_the_truth_is_left_for_the_two_channel_scans_best(
     assert d.weights is not None
     channel = AttitudeChannel.of(model, log, d.weights.coupling, d.weights.reference)
     assert channel is not None
-    assert scanned_baseline(model, log, d.baseline, d.weights, channel) is d.baseline
+    assert scanned_baseline(model, log, d.baseline, d.weights, channel, model.problem(log)) is d.baseline
 
 
 def test_a_physical_payload_is_judged_with_the_baselines_error_model() -> None:

@@ -14,7 +14,7 @@ from scipy.stats import qmc
 
 from estimators.attitude_channel import AttitudeChannel
 from estimators.diagnostics.model_fit import MIN_STEP_GAIN_CHI2, ChannelWeights, ModelFit, best_of_grid, fit_model, joint_chi2
-from estimators.problem import IdentificationModel
+from estimators.problem import IdentificationModel, IdentificationProblem
 from spaceid_gym.log import MeasurementLog
 
 #: the change of the baseline's whitened attitude residual (chi-square units) from moving the channel's reference, at
@@ -28,20 +28,29 @@ MAX_BASELINE_PASSES = 8
 #: the points of :func:`scanned_baseline`'s scan of the model's box (a scrambled Sobol set, a power of two)
 SCAN_POINTS = 128
 
-#: the seed of that set's scrambling: the same points for every log, so that a diagnosis is reproducible
+#: the seed of that set's scrambling: the same points for every log of a model (they depend on its number of
+#: unknowns), so that a diagnosis is reproducible
 SCAN_SEED = 0
 
 
 def scanned_baseline(
-    model: IdentificationModel, log: MeasurementLog, baseline: ModelFit, weights: ChannelWeights, channel: AttitudeChannel
+    model: IdentificationModel,
+    log: MeasurementLog,
+    baseline: ModelFit,
+    weights: ChannelWeights,
+    channel: AttitudeChannel,
+    problem: IdentificationProblem,
 ) -> ModelFit:
-    """The ``baseline`` (the gyro's fit) refitted on both channels from it and from the points of a scan of the model's
-    whole box that fit both channels better than it does (under ``weights``); the ``baseline`` itself if none does.
+    """The ``baseline`` (the gyro's fit) refitted on both channels from the best of it and the points of a scan of the
+    model's whole box that fit both channels better than it does (under ``weights``); the ``baseline`` itself if none
+    does. ``problem``: ``model``'s problem on ``log``.
 
     The scan: :data:`SCAN_POINTS` points of a scrambled Sobol set, scored on both channels as a candidate's grid is
     (:func:`~estimators.diagnostics.model_fit.best_of_grid`, the gyro's chi-square plus the attitude's); its best
-    :data:`~estimators.diagnostics.model_fit.GRID_STARTS` that beat the baseline start the fit with it
-    (:func:`~estimators.diagnostics.model_fit.fit_model`, the attitude error model refitted).
+    :data:`~estimators.diagnostics.model_fit.GRID_STARTS` that beat the baseline are starts of
+    :func:`~estimators.diagnostics.model_fit.fit_model` with it, which polishes each on the gyro and refines the one
+    that fits both channels best (the attitude error model refitted). Not yet guaranteed: that the refit ends at least
+    as well as the baseline's own refinement would (a review's finding, open).
 
     Why: the gyro's likelihood in the fuel's unknowns can have several basins within a unit or two of chi-square, or
     none near the truth, where the attitude tells them apart by thousands of units; the two-channel refinement of the
@@ -50,7 +59,6 @@ def scanned_baseline(
     at 17.6 kg for 35.4 kg (the gyro's best basin, at 40.9 kg, was 1.3 units lower); the baseline refined from it
     ended at 2.5 kg with the tank on its bound, and the log was called ``unexplained`` (another draw: ``slosh``, fuel
     z -78). The scan's best start, refitted, reached the truth's basin (z within 1.1) and the log was ``none``."""
-    problem = model.problem(log)
     params = problem.parameters
     sobol = qmc.Sobol(d=params.n_params, scramble=True, rng=np.random.default_rng(SCAN_SEED))
     points = qmc.scale(sobol.random(SCAN_POINTS), params.lower, params.upper)
@@ -60,7 +68,8 @@ def scanned_baseline(
     ]
     if not better:
         return baseline
-    return fit_model(model, log, starts=[baseline.theta, *better], weights=weights, channel=channel, profile_noise=True)[0]
+    starts = [baseline.theta, *better]
+    return fit_model(model, log, starts=starts, weights=weights, channel=channel, problem=problem, profile_noise=True)[0]
 
 
 def profiled_baseline(

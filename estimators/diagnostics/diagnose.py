@@ -336,7 +336,7 @@ def _diagnose(
         weights = ChannelWeights(
             white_std, channel.estimate_noise(baseline.theta), channel.coupling, channel.reference, channel.axes
         )
-        baseline = scanned_baseline(model, log, baseline, weights, channel)
+        baseline = scanned_baseline(model, log, baseline, weights, channel, problem)
         baseline, weights = profiled_baseline(model, log, baseline, weights, channel)
         channel, baseline, weights = rereferenced(model, log, baseline, weights, channel)
         # the baseline's own error model weights every candidate's fit and is the reference of the log-determinants
