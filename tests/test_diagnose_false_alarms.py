@@ -9,10 +9,13 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
+import estimators.diagnostics.baseline as baseline_module
+import estimators.diagnostics.diagnose as diagnose_module
 from estimators.attitude_channel import AttitudeChannel
 from estimators.attitude_propagation import PropagatedNoise
 from estimators.diagnostics.baseline import scanned_baseline
 from estimators.diagnostics.diagnose import CLEAN_LOG_FAMILIES, NO_MISSING_EFFECT, ModelFit, _better_baseline_start, diagnose
+from estimators.diagnostics.model_fit import ChannelWeights
 from estimators.diagnostics.power import N_TESTS
 from estimators.diagnostics.verdict import held_likelihood_ratio
 from estimators.diagnostics.workflow import true_parameters
@@ -141,6 +144,78 @@ def test_the_baseline_is_restarted_from_the_candidate_that_fits_the_model_as_giv
     assert _better_baseline_start(problem, at_best, [baseline, close, closer], value) is None
     with pytest.raises(RuntimeError, match="unknowns do not begin"):
         _better_baseline_start(problem, baseline, [_fit_at([20.0, 0.2, 0.0, 0.0], "delay", ("a", "b", "c", "d"))], value)
+
+
+def test_the_scanned_baseline_keeps_the_better_of_its_own_refinement_and_the_scans(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """:func:`scanned_baseline`'s rule, its scoring and fits stood in for: the baseline unrefined when no scanned point
+    fits both channels better; otherwise the baseline refined on its own and refined from the scan's winners, the
+    better of the two on both channels (the gyro's fit was never refined before when a scanned point won); the scan
+    over the base's unknowns alone, a model's effects held at the baseline's values."""
+    env = simulate_variation(draw_variation("none", 3, {"robot": "quick3", "rate_hz": 20}), 5.0)
+    model = IdentificationModel(env.robot, "fuel", effects="initial_momentum")
+    log, problem = env.measurement_log(), model.problem(env.measurement_log())
+    names = tuple(problem.parameters.names)
+    baseline = _fit_at([10.0, 0.1, 0.1, 0.1, 0.5, -0.5, 0.25], None, names)
+    weights = ChannelWeights(1.0, None, None, None, None)  # type: ignore[arg-type]
+    scanned_points: list[np.ndarray] = []
+    refits: list[list[np.ndarray]] = []
+    # the joint chi-square: the distance of the fuel from 20 kg; the scan's winners are its points within 4 kg
+    monkeypatch.setattr(baseline_module, "joint_chi2", lambda problem, channel, weights, theta: abs(theta[0] - 20.0))
+
+    def grid(problem: object, points: list[np.ndarray], channel: object, weights: object) -> list[np.ndarray]:
+        scanned_points.extend(points)
+        return sorted((p for p in points if abs(p[0] - 20.0) < 4.0), key=lambda p: abs(p[0] - 20.0))[:3]
+
+    def refit(*args: object, starts: list[np.ndarray], **kwargs: object) -> tuple[ModelFit, None]:
+        refits.append(starts)
+        own = len(starts) == 1 and np.array_equal(starts[0], baseline.theta)
+        fit = _fit_at(list(starts[0]), None, names)
+        fit.attitude_chi2 = outcome["own" if own else "scan"]
+        return fit, None
+
+    monkeypatch.setattr(baseline_module, "best_of_grid", grid)
+    monkeypatch.setattr(baseline_module, "fit_model", refit)
+    outcome = {"own": 5.0, "scan": 9.0}
+    kept = scanned_baseline(model, log, baseline, weights, None, problem)  # type: ignore[arg-type]
+    assert len(scanned_points) == 128 and all(np.array_equal(p[4:], baseline.theta[4:]) for p in scanned_points)
+    lower, upper = problem.parameters.lower[:4], problem.parameters.upper[:4]
+    assert all(np.all((p[:4] >= lower) & (p[:4] <= upper)) for p in scanned_points)
+    assert len({float(p[0]) for p in scanned_points}) == 128  # the fuel scanned, not held
+    assert len(refits) == 2 and np.array_equal(refits[0][0], baseline.theta) and len(refits[1]) == 3
+    assert np.array_equal(kept.theta, baseline.theta)  # its own refinement ends better than the scan's
+    outcome["scan"] = 1.0
+    assert abs(scanned_baseline(model, log, baseline, weights, None, problem).theta[0] - 20.0) < 4.0  # type: ignore[arg-type]
+    # no scanned point better than the baseline: the baseline itself, no refit
+    refits.clear()
+    monkeypatch.setattr(
+        baseline_module, "joint_chi2", lambda problem, channel, weights, theta: 0.0 if theta is baseline.theta else 1.0
+    )
+    assert scanned_baseline(model, log, baseline, weights, None, problem) is baseline  # type: ignore[arg-type]
+    assert not refits
+
+
+def test_a_restarted_diagnosis_says_where_its_baseline_came_from_and_restarts_once(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The restart of :func:`diagnose` from a candidate's unknowns that fit the model as given better than the baseline
+    (:func:`_better_baseline_start`, stood in for): the diagnosis is made again from there, says so in its reason and
+    ``baseline_restarted_from``, and is not restarted a second time."""
+    env = simulate_variation(draw_variation("none", 3, {"robot": "quick3", "rate_hz": 20, "attitude": "none"}), 10.0)
+    model, log = IdentificationModel(env.robot, "fuel"), env.measurement_log()
+    calls: list[int] = []
+
+    def always(problem: object, baseline: ModelFit, fits: list[ModelFit], value: object) -> tuple[str, np.ndarray, float]:
+        calls.append(len(fits))
+        return "gyro_bias", np.array(baseline.theta), 2.5
+
+    monkeypatch.setattr(diagnose_module, "_better_baseline_start", always)
+    d = diagnose(model, log, candidates=["gyro_bias", "delay"])
+    assert calls == [2]
+    assert d.baseline_restarted_from == "gyro_bias"
+    assert d.reason.startswith(
+        "the baseline was refitted from the gyro_bias fit's unknowns, which fit the model as given better by 2.5"
+    )
+    assert d.to_dict()["baseline_restarted_from"] == "gyro_bias"
 
 
 def test_a_gyro_basin_far_from_the_truth_is_left_for_the_two_channel_scans_best() -> None:

@@ -8,7 +8,7 @@ import pytest
 import estimators.problem as problem_module
 from estimators.least_squares import interior_start
 from estimators.models.slosh_dynamics import N_INPUTS, N_LANE_ROWS, integrate_slosh, slosh_momentum
-from estimators.models.tangents import slosh_tangents
+from estimators.models.tangents import slosh_tangents, twist_tangents
 from estimators.problem import IdentificationModel
 
 #: each case's effects and their unknowns, all switched on (a pendulum's rod off the base's axes, a scale matrix with
@@ -137,6 +137,19 @@ def test_the_slosh_kernels_refuse_times_that_do_not_increase() -> None:
         slosh_momentum(twist[None], t_s, inputs[None], False)
     with pytest.raises(ValueError, match="increase strictly"):
         slosh_tangents(twist, np.zeros((2, n_t, 6)), t_s, inputs, np.zeros((2, N_INPUTS)), False)
+
+
+def test_the_twist_kernel_refuses_maps_of_other_sizes() -> None:
+    """The twist's tangents loop over the 10 inertial parameters and the 6 momentum rows: a payload map of another size
+    raises instead of reading past its end."""
+    n_t, n_k = 4, 2
+    ten, d_ten = np.ones((1, 10)), np.zeros((n_k, 10))
+    args = (np.zeros((1, 1, 6)), np.zeros((n_k, 1, 6)), False, np.zeros((1, 1, 10)), np.zeros((n_k, 1, 10)), False, 1.0)
+    arm = (np.zeros((n_t, 3)), np.zeros((n_t, 6)), np.zeros((n_t, 6)))
+    with pytest.raises(ValueError, match="momentum_map"):
+        twist_tangents(ten, d_ten, ten, d_ten, True, *args, *arm, np.zeros((n_t, 10, 10)), np.zeros((n_t, 6, 9)))
+    with pytest.raises(ValueError, match="10 inertial"):
+        twist_tangents(ten, np.zeros((n_k, 9)), ten, d_ten, False, *args, *arm, np.zeros((n_t, 10, 10)), np.zeros((n_t, 6, 10)))
 
 
 @pytest.mark.parametrize("rod", [False, True])

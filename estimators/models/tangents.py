@@ -53,8 +53,16 @@ def twist_tangents(
     ``params10`` (1, 10) and ``d_params10`` (K, 10): the base's parameters and their derivatives; ``payload10``
     (1, 10), ``d_payload10`` (K, 10); ``extra`` (1, T, 6), ``d_extra`` (K, T, 6): the extra momentum; ``moving``
     (1, T, 10), ``d_moving`` (K, T, 10): parameters added per sample; each used only with its ``with_`` flag (the
-    arrays may then be placeholders). The arm's terms as in the momentum model."""
+    arrays may then be placeholders). The arm's terms as in the momentum model: ``first`` (T, 3), ``inertia6`` (T, 6),
+    ``momentum`` (T, 6), ``to_base`` (T, 10, 10) carries the payload's 10 parameters into the composite's,
+    ``momentum_map`` (T, 6, 10) into the momentum; the loops below are written for those sizes, checked here."""
     n_k, n_t = d_params10.shape[0], first.shape[0]
+    if params10.shape[1] != 10 or d_payload10.shape[1] != 10 or d_params10.shape[1] != 10:
+        raise ValueError("twist_tangents: the parameter sets must hold the 10 inertial parameters")
+    if with_payload and (
+        to_base.shape[1] != 10 or to_base.shape[2] != 10 or momentum_map.shape[1] != 6 or momentum_map.shape[2] != 10
+    ):
+        raise ValueError("twist_tangents: to_base must be (T, 10, 10) and momentum_map (T, 6, 10)")
     out = np.empty((1, n_t, 6))
     # the directions side by side, a lane each (the last axis): every direction's derivative is computed by the same
     # operations in the same order as one at a time, and the compiler vectorises them (25 % faster than a loop over
