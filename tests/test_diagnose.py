@@ -25,10 +25,18 @@ from estimators.diagnostics.diagnose import (
     fit_model,
     nested_p_value,
 )
+from estimators.diagnostics.matrix import _fuel_z_rms
 from estimators.diagnostics.model_fit import _scored
 from estimators.diagnostics.suite import DIAGNOSTIC_EXCITATION
 from estimators.diagnostics.verdict import _prefer_encompassing, _score, rivals
-from estimators.diagnostics.workflow import bound_model, parameter_errors, run_loop, true_parameters, write_report
+from estimators.diagnostics.workflow import (
+    ParameterErrors,
+    bound_model,
+    parameter_errors,
+    run_loop,
+    true_parameters,
+    write_report,
+)
 from estimators.estimate import Estimate
 from estimators.least_squares import interior_start
 from estimators.problem import IdentificationModel
@@ -379,6 +387,21 @@ def test_parameter_errors_use_the_bound_at_the_truth(paper6: Robot, short_fuel_e
     np.testing.assert_allclose(errors.z, (off[:4] - ep.theta_true) / at_truth)
     with pytest.raises(SpaceIdInputError, match="not the model's"):
         parameter_errors(IdentificationModel(paper6, "fuel"), ep.log, estimate, truth)
+
+
+def test_an_unknown_the_log_does_not_bound_has_no_z() -> None:
+    """Where the bound at the truth is infinite (the log does not inform the unknown), the error has no z: NaN, not
+    ``error / inf`` = 0, which the variation matrix's fuel z RMS read as a perfect estimate; the RMS leaves it out."""
+    errors = ParameterErrors(
+        ("fuel_consumed_kg", "tank_x_m", "tank_y_m", "tank_z_m"),
+        np.array([-1.0, 0.01, 0.002, -0.008]),
+        np.array([0.5, np.inf, 0.001, np.inf]),
+        np.array([0.5, np.inf, 0.001, np.inf]),
+    )
+    np.testing.assert_array_equal(errors.z, [-2.0, np.nan, 2.0, np.nan])
+    assert [r["|error| / std"] for r in errors.rows()] == [2.0, None, 2.0, None]
+    rows = [{f"z_{n}_after": z for n, z in zip(("mdf", "bx", "by", "bz"), errors.z, strict=True)}]
+    assert _fuel_z_rms(rows) == pytest.approx(2.0)
 
 
 def test_the_bound_is_the_simulated_variants(paper6: Robot, short_fuel_episode) -> None:

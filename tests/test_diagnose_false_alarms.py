@@ -15,7 +15,7 @@ from estimators.attitude_channel import AttitudeChannel
 from estimators.attitude_propagation import PropagatedNoise
 from estimators.diagnostics.baseline import scanned_baseline
 from estimators.diagnostics.diagnose import CLEAN_LOG_FAMILIES, NO_MISSING_EFFECT, ModelFit, _better_baseline_start, diagnose
-from estimators.diagnostics.model_fit import ChannelWeights
+from estimators.diagnostics.model_fit import ChannelWeights, fit_model
 from estimators.diagnostics.power import N_TESTS
 from estimators.diagnostics.verdict import held_likelihood_ratio
 from estimators.diagnostics.workflow import true_parameters
@@ -169,15 +169,18 @@ def test_the_scanned_baseline_keeps_the_better_of_its_own_refinement_and_the_sca
         return sorted((p for p in points if abs(p[0] - 20.0) < 4.0), key=lambda p: abs(p[0] - 20.0))[:3]
 
     def refit(*args: object, starts: list[np.ndarray], **kwargs: object) -> tuple[ModelFit, None]:
+        # refined on both channels, the error model refitted, on the diagnosis's problem
+        assert kwargs["profile_noise"] is True and kwargs["problem"] is problem and kwargs["weights"] is weights
         refits.append(starts)
         own = len(starts) == 1 and np.array_equal(starts[0], baseline.theta)
         fit = _fit_at(list(starts[0]), None, names)
-        fit.attitude_chi2 = outcome["own" if own else "scan"]
+        fit.rss, fit.attitude_chi2 = outcome["own" if own else "scan"]
         return fit, None
 
     monkeypatch.setattr(baseline_module, "best_of_grid", grid)
     monkeypatch.setattr(baseline_module, "fit_model", refit)
-    outcome = {"own": 5.0, "scan": 9.0}
+    # (rss, attitude chi-square): the own refinement better on both channels (4 against 5), worse on the gyro alone
+    outcome = {"own": (1.0, 3.0), "scan": (5.0, 0.0)}
     kept = scanned_baseline(model, log, baseline, weights, None, problem)  # type: ignore[arg-type]
     assert len(scanned_points) == 128 and all(np.array_equal(p[4:], baseline.theta[4:]) for p in scanned_points)
     lower, upper = problem.parameters.lower[:4], problem.parameters.upper[:4]
@@ -185,7 +188,8 @@ def test_the_scanned_baseline_keeps_the_better_of_its_own_refinement_and_the_sca
     assert len({float(p[0]) for p in scanned_points}) == 128  # the fuel scanned, not held
     assert len(refits) == 2 and np.array_equal(refits[0][0], baseline.theta) and len(refits[1]) == 3
     assert np.array_equal(kept.theta, baseline.theta)  # its own refinement ends better than the scan's
-    outcome["scan"] = 1.0
+    # the scan's better on both channels (4 against 5), worse on the attitude alone
+    outcome.update(own=(5.0, 0.0), scan=(1.0, 3.0))
     assert abs(scanned_baseline(model, log, baseline, weights, None, problem).theta[0] - 20.0) < 4.0  # type: ignore[arg-type]
     # no scanned point better than the baseline: the baseline itself, no refit
     refits.clear()
@@ -204,13 +208,27 @@ def test_a_restarted_diagnosis_says_where_its_baseline_came_from_and_restarts_on
     model, log = IdentificationModel(env.robot, "fuel"), env.measurement_log()
     calls: list[int] = []
 
+    restart_point: list[np.ndarray] = []
+    fitted_from: list[list[np.ndarray]] = []
+
     def always(problem: object, baseline: ModelFit, fits: list[ModelFit], value: object) -> tuple[str, np.ndarray, float]:
         calls.append(len(fits))
-        return "gyro_bias", np.array(baseline.theta), 2.5
+        restart_point.append(np.array(baseline.theta) * 0.9)  # a point of its own, inside the box
+        return "gyro_bias", restart_point[-1], 2.5
+
+    def spied(*args: object, **kwargs: object) -> tuple[ModelFit, object]:
+        starts = kwargs.get("starts")
+        if isinstance(starts, list):
+            fitted_from.append(starts)
+        return fit_model(*args, **kwargs)  # type: ignore[arg-type]
 
     monkeypatch.setattr(diagnose_module, "_better_baseline_start", always)
+    monkeypatch.setattr(diagnose_module, "fit_model", spied)
     d = diagnose(model, log, candidates=["gyro_bias", "delay"])
     assert calls == [2]
+    # the second pass's baseline fitted from the point handed over, and the diagnosis's baseline is that fit
+    assert any(len(s) == 1 and np.array_equal(s[0], restart_point[0]) for s in fitted_from)
+    np.testing.assert_array_equal(d.baseline.theta, fit_model(model, log, starts=restart_point)[0].theta)
     assert d.baseline_restarted_from == "gyro_bias"
     assert d.reason.startswith(
         "the baseline was refitted from the gyro_bias fit's unknowns, which fit the model as given better by 2.5"

@@ -140,14 +140,17 @@ def test_the_slosh_kernels_refuse_times_that_do_not_increase() -> None:
 
 
 def test_the_twist_kernel_refuses_maps_of_other_sizes() -> None:
-    """The twist's tangents loop over the 10 inertial parameters and the 6 momentum rows: a payload map of another size
-    raises instead of reading past its end."""
+    """The twist's tangents loop over the 10 inertial parameters, the 6 momentum rows and the log's samples: a payload
+    map, an extra momentum or a parameter set of another size raises instead of reading past an array's end."""
     n_t, n_k = 4, 2
     ten, d_ten = np.ones((1, 10)), np.zeros((n_k, 10))
     args = (np.zeros((1, 1, 6)), np.zeros((n_k, 1, 6)), False, np.zeros((1, 1, 10)), np.zeros((n_k, 1, 10)), False, 1.0)
     arm = (np.zeros((n_t, 3)), np.zeros((n_t, 6)), np.zeros((n_t, 6)))
     with pytest.raises(ValueError, match="momentum_map"):
         twist_tangents(ten, d_ten, ten, d_ten, True, *args, *arm, np.zeros((n_t, 10, 10)), np.zeros((n_t, 6, 9)))
+    extra = (np.zeros((1, n_t, 6)), np.zeros((n_k, n_t - 1, 6)), True, *args[3:])
+    with pytest.raises(ValueError, match="extra momentum"):
+        twist_tangents(ten, d_ten, ten, d_ten, False, *extra, *arm, np.zeros((1, 10, 10)), np.zeros((1, 6, 10)))
     with pytest.raises(ValueError, match="10 inertial"):
         twist_tangents(ten, np.zeros((n_k, 9)), ten, d_ten, False, *args, *arm, np.zeros((n_t, 10, 10)), np.zeros((n_t, 6, 10)))
 

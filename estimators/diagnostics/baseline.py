@@ -1,5 +1,5 @@
-"""The baseline of a diagnosis with attitude: the model as given, started from the best of the gyro's fit and a scan
-of its whole box on both channels (:func:`scanned_baseline`), fitted on the gyro and the attitude at its profile
+"""The baseline of a diagnosis with attitude: the model as given, started from the better of the gyro's fit and a
+scan of its base's box on both channels (:func:`scanned_baseline`), fitted on the gyro and the attitude at its profile
 likelihood's optimum (:func:`profiled_baseline`), with the attitude channel's integration error taken out at that
 fit (:func:`rereferenced`). Every candidate of :func:`~estimators.diagnostics.diagnose.diagnose` starts from it and
 is scored against it."""
@@ -50,17 +50,22 @@ def scanned_baseline(
     channel: AttitudeChannel,
     problem: IdentificationProblem,
 ) -> ModelFit:
-    """The ``baseline`` (the gyro's fit) refitted on both channels, the best of it and the points of a scan of the
-    model's box that fit both channels better than it does (under ``weights``); the ``baseline`` itself, unrefined,
-    if no point does. ``problem``: ``model``'s problem on ``log``.
+    """The better on both channels (under ``weights``) of two refits: the ``baseline`` (the gyro's fit) refined on
+    both channels, and the points of a scan of the model's box that fit both channels better than it does, refined
+    likewise; the ``baseline`` itself, unrefined, if no scanned point does. ``problem``: ``model``'s problem on
+    ``log``.
 
     The scan: :data:`SCAN_POINTS` points of a scrambled Sobol set over the base's unknowns (a model's effects held
     at the ``baseline``'s values), scored on both channels as a candidate's grid is
     (:func:`~estimators.diagnostics.model_fit.best_of_grid`, the gyro's chi-square plus the attitude's). Where some of
     its best :data:`~estimators.diagnostics.model_fit.GRID_STARTS` beat the baseline, the baseline is refined on
-    both channels on its own and from each gyro basin those points reach
-    (:func:`~estimators.diagnostics.model_fit.fit_model` with ``each_basin``, the attitude error model refitted), and
-    the fit of lowest ``-2 log L`` on both channels is kept: never worse than the baseline's own refinement.
+    both channels on its own, and those points are starts of a second refinement
+    (:func:`~estimators.diagnostics.model_fit.fit_model`: each polished on the gyro, the best on both channels of
+    the polished and the raw points refined on both, the attitude error model refitted); the fit of lowest
+    ``-2 log L`` on both channels is kept, so the scan never ends worse than the baseline's own refinement (before,
+    one refinement started from the best of the baseline and the points, and a point that scored better unrefined
+    could end worse than the baseline refined). :func:`profiled_baseline` then keeps the fit unless a pass improves
+    on it.
 
     Why: the gyro's likelihood in the fuel's unknowns can have several basins within a unit or two of chi-square, or
     none near the truth, where the attitude tells them apart by thousands of units; the two-channel refinement of the
@@ -70,8 +75,8 @@ def scanned_baseline(
     ended at 2.5 kg with the tank on its bound, and the log was called ``unexplained`` (another draw: ``slosh``, fuel
     z -78). The scan's best start, refitted, reached the truth's basin (z within 1.1) and the log was ``none``."""
     params = problem.parameters
-    # the base's unknowns only: an effect's search range is physically wide (a momentum that spins the satellite at
-    # degrees a second), and the model as given holds its effects where its gyro fit put them
+    # the base's unknowns only: the model as given holds its effects where its gyro fit put them, and their search
+    # ranges are physically wide (a momentum that spins the satellite at degrees a second, a payload's 10 unknowns)
     k = params.base.n_params if isinstance(params, WithEffects) else params.n_params
     sobol = qmc.Sobol(d=k, scramble=True, rng=np.random.default_rng(SCAN_SEED))
     points = np.tile(baseline.theta, (SCAN_POINTS, 1))
@@ -85,19 +90,23 @@ def scanned_baseline(
     # the baseline refined on its own, as it would be without the scan, and each basin the scan's points reach:
     # the best of them on both channels, so the scan never ends worse than the baseline's own refinement
     fits = [
-        fit_model(
-            model, log, starts=starts, weights=weights, channel=channel, problem=problem, profile_noise=True, each_basin=True
-        )[0]
+        fit_model(model, log, starts=starts, weights=weights, channel=channel, problem=problem, profile_noise=True)[0]
         for starts in ([baseline.theta], better)
     ]
     return min(fits, key=lambda f: joint_objective(f, weights))
 
 
 def profiled_baseline(
-    model: IdentificationModel, log: MeasurementLog, baseline: ModelFit, weights: ChannelWeights, channel: AttitudeChannel
+    model: IdentificationModel,
+    log: MeasurementLog,
+    baseline: ModelFit,
+    weights: ChannelWeights,
+    channel: AttitudeChannel,
+    refined: bool = False,
 ) -> tuple[ModelFit, ChannelWeights]:
     """The ``baseline`` refitted on both channels at its profile likelihood's optimum, with the ``weights`` of its own
-    attitude error model.
+    attitude error model. ``refined``: the ``baseline`` is a fit on both channels under ``channel`` already, its error
+    model refitted (:func:`scanned_baseline`'s), and is kept unless a pass improves on it; else the first pass is.
 
     Each pass is what every candidate gets from the baseline's state: a fit under the error model of ``weights``, the
     error model refitted at it, the fit refined (:func:`fit_model` with ``profile_noise``). The passes go on until one
@@ -110,6 +119,10 @@ def profiled_baseline(
     sigma2 = weights.gyro_std_rad_s**2
     reference = weights.attitude  # any fixed error model: the log-determinant it subtracts cancels between passes
     best, best_weights, best_value = baseline, weights, math.inf
+    if refined:
+        assert baseline.attitude_noise is not None
+        best_weights = replace(weights, attitude=baseline.attitude_noise)
+        best_value = baseline.rss / sigma2 + channel.profile_chi2(baseline.theta, baseline.attitude_noise, reference)
     for _ in range(MAX_BASELINE_PASSES):
         fit = fit_model(model, log, starts=[best.theta], weights=best_weights, channel=channel, profile_noise=True)[0]
         assert fit.attitude_noise is not None

@@ -217,7 +217,8 @@ def short_of_targets(summary: list[dict[str, Any]]) -> list[str]:
 
 def _fuel_z_rms(rows: list[dict[str, Any]]) -> float:
     """The RMS over ``rows`` and the four fuel unknowns of the error after the verdict over its Cramér-Rao std
-    (``z_*_after``; 1 for an efficient, unbiased estimate); NaN without rows."""
+    (``z_*_after``; 1 for an efficient, unbiased estimate), the unknowns without a finite bound left out (their z is
+    NaN: :attr:`~estimators.diagnostics.workflow.ParameterErrors.z`); NaN without rows."""
     z = np.array([[r[f"z_{name}_after"] for name in ("mdf", "bx", "by", "bz")] for r in rows], dtype=float)
     return float(np.sqrt(np.nanmean(z**2))) if z.size and np.isfinite(z).any() else math.nan
 

@@ -55,14 +55,29 @@ def twist_tangents(
     (1, T, 10), ``d_moving`` (K, T, 10): parameters added per sample; each used only with its ``with_`` flag (the
     arrays may then be placeholders). The arm's terms as in the momentum model: ``first`` (T, 3), ``inertia6`` (T, 6),
     ``momentum`` (T, 6), ``to_base`` (T, 10, 10) carries the payload's 10 parameters into the composite's,
-    ``momentum_map`` (T, 6, 10) into the momentum; the loops below are written for those sizes, checked here."""
+    ``momentum_map`` (T, 6, 10) into the momentum. The loops below are written for these sizes: each array used
+    is checked against them (a wrong size raises ``ValueError`` rather than reading past an array's end)."""
     n_k, n_t = d_params10.shape[0], first.shape[0]
-    if params10.shape[1] != 10 or d_payload10.shape[1] != 10 or d_params10.shape[1] != 10:
+    if params10.shape[1] != 10 or d_params10.shape[1] != 10:
         raise ValueError("twist_tangents: the parameter sets must hold the 10 inertial parameters")
+    if inertia6.shape[0] != n_t or momentum.shape[0] != n_t:
+        raise ValueError("twist_tangents: the arm's terms must have one row per sample")
     if with_payload and (
-        to_base.shape[1] != 10 or to_base.shape[2] != 10 or momentum_map.shape[1] != 6 or momentum_map.shape[2] != 10
+        payload10.shape[1] != 10
+        or d_payload10.shape[0] != n_k
+        or d_payload10.shape[1] != 10
+        or to_base.shape[0] != n_t
+        or to_base.shape[1] != 10
+        or to_base.shape[2] != 10
+        or momentum_map.shape[0] != n_t
+        or momentum_map.shape[1] != 6
+        or momentum_map.shape[2] != 10
     ):
-        raise ValueError("twist_tangents: to_base must be (T, 10, 10) and momentum_map (T, 6, 10)")
+        raise ValueError("twist_tangents: the payload must be (1, 10), (K, 10), to_base (T, 10, 10), momentum_map (T, 6, 10)")
+    if with_extra and (extra.shape[1] != n_t or d_extra.shape[0] != n_k or d_extra.shape[1] != n_t):
+        raise ValueError("twist_tangents: the extra momentum must be (1, T, 6) and (K, T, 6)")
+    if with_moving and (moving.shape[1] != n_t or d_moving.shape[0] != n_k or d_moving.shape[1] != n_t):
+        raise ValueError("twist_tangents: the moved parameters must be (1, T, 10) and (K, T, 10)")
     out = np.empty((1, n_t, 6))
     # the directions side by side, a lane each (the last axis): every direction's derivative is computed by the same
     # operations in the same order as one at a time, and the compiler vectorises them (25 % faster than a loop over
