@@ -5,6 +5,10 @@ that are wrong are listed with their z. The figures of a single log's noise draw
 matrix) come from here. Usage::
 
     python benchmarks/noise_draws.py none 10565 --first-draw 1000 --draws 100 --jobs 2
+    python benchmarks/noise_draws.py none 10713 --fix rate_hz=50 --draws 8 --jobs 2
+
+``--fix`` pins axes of the case as the matrix's ``--fix`` does (the rest drawn from the seed as before, so
+``--fix rate_hz=50`` is the same motion sampled at 50 Hz).
 """
 
 from __future__ import annotations
@@ -16,8 +20,9 @@ from typing import Any
 import numpy as np
 
 from estimators.diagnostics.suite import diagnosed_cells
+from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.executors import add_executor_arguments, executor_from_arguments, run_jobs
-from spaceid_gym.variations import VariationCase, draw_variation, simulate_variation
+from spaceid_gym.variations import VariationCase, draw_variation, parse_fixed, simulate_variation
 
 #: the fuel unknowns, as the matrix's z columns name them
 UNKNOWNS = ("mdf", "bx", "by", "bz")
@@ -43,11 +48,15 @@ def main() -> None:
     parser.add_argument("--first-draw", type=int, default=1000, help="the first noise seed")
     parser.add_argument("--draws", type=int, default=20, help="how many noise seeds, from --first-draw on")
     parser.add_argument("--seconds", type=float, default=60.0, help="the log's length (the matrix's: 60 s)")
+    parser.add_argument("--fix", default=None, help="pin axes of the case, e.g. 'rate_hz=50,noise_scale=1.0'")
     add_executor_arguments(parser)
     args = parser.parse_args()
     if args.draws < 1:
         parser.error(f"--draws: expected at least 1, got {args.draws}")
-    case = draw_variation(args.effect, args.seed)
+    try:
+        case = draw_variation(args.effect, args.seed, parse_fixed(args.fix))
+    except SpaceIdInputError as error:
+        parser.error(str(error))
     print(f"{args.effect} {args.seed}: {case.axes()}")
     draws = range(args.first_draw, args.first_draw + args.draws)
     rows = run_jobs(partial(diagnosed_draw, case, args.seconds), draws, executor_from_arguments(args, 64), desc="draws")

@@ -118,18 +118,23 @@ def profiled_baseline(
     alone, and a delay was named (likelihood ratio 26.4); with the passes until none gains, its ratio is 0.3."""
     sigma2 = weights.gyro_std_rad_s**2
     reference = weights.attitude  # any fixed error model: the log-determinant it subtracts cancels between passes
+
+    def value(fit: ModelFit) -> float:
+        """``-2 log L`` of ``fit`` on both channels, the attitude under its own refitted error model."""
+        assert fit.attitude_noise is not None
+        return fit.rss / sigma2 + channel.profile_chi2(fit.theta, fit.attitude_noise, reference)
+
     best, best_weights, best_value = baseline, weights, math.inf
     if refined:
-        assert baseline.attitude_noise is not None
+        best_value = value(baseline)  # asserts the error model refitted
         best_weights = replace(weights, attitude=baseline.attitude_noise)
-        best_value = baseline.rss / sigma2 + channel.profile_chi2(baseline.theta, baseline.attitude_noise, reference)
     for _ in range(MAX_BASELINE_PASSES):
         fit = fit_model(model, log, starts=[best.theta], weights=best_weights, channel=channel, profile_noise=True)[0]
         assert fit.attitude_noise is not None
-        value = fit.rss / sigma2 + channel.profile_chi2(fit.theta, fit.attitude_noise, reference)
-        gain = best_value - value
+        fit_value = value(fit)
+        gain = best_value - fit_value
         if gain > 0.0:
-            best, best_value = fit, value
+            best, best_value = fit, fit_value
             best_weights = replace(weights, attitude=fit.attitude_noise)
         if gain < MIN_STEP_GAIN_CHI2:
             break

@@ -86,6 +86,7 @@ from estimators.diagnostics.model_fit import (
     AttitudeIndependence,
     ChannelWeights,
     ModelFit,
+    attitude_dependence,
     best_of_grid,
     difference_noise_std,
     fit_model,
@@ -333,14 +334,14 @@ def _rechecked_at_named_fit(
     pulled by a coupling the tracker does not have, left 1.22 times the gyro's noise (1.01 at the truth)."""
     best = diagnosis.best
     if best is not None:
-        again = independent_attitude_channel(candidate_model(model, best.spec), log, best.theta, alpha)
-        if again.channel is not None and again.coupled is None:
+        again = attitude_dependence(candidate_model(model, best.spec), log, best.theta)
+        if again is not None and again[1] >= alpha:
             channel = AttitudeChannel.of(model, log, reference=baseline.theta)
             rediagnosed = _diagnose(model, log, names, baseline, alpha, channel)
             rediagnosed.reason = (
                 f"the attitude's steps followed the gyro's residual at the model as given (correlation {independence.raw[0]:+.2f} "
                 f"of their high-frequency parts, p = {independence.raw[1]:.2g}) but not at the {best.effect} fit "
-                f"({again.raw[0]:+.2f}, p = {again.raw[1]:.2g}): the missing effect's own signal in both channels, not an "
+                f"({again[0]:+.2f}, p = {again[1]:.2g}): the missing effect's own signal in both channels, not an "
                 f"attitude fused with this gyro, so the attitude is compared as it comes; {rediagnosed.reason}"
             )
             return rediagnosed, channel

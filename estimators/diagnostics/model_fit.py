@@ -569,6 +569,25 @@ class AttitudeIndependence:
         )
 
 
+def _residual_steps(
+    model: IdentificationModel, log: MeasurementLog, theta: FloatArray
+) -> tuple[AttitudeChannel, IdentificationProblem, FloatArray, FloatArray] | None:
+    """``model``'s attitude channel on ``log`` referenced at ``theta`` (k,), its problem, the gyro residual (T, 3) and
+    the attitude residual's steps (T-1, 3) there; ``None`` without attitude in the log."""
+    channel = AttitudeChannel.of(model, log, reference=theta)
+    if channel is None:
+        return None
+    problem = model.problem(log)
+    return channel, problem, problem.residuals(theta, count=False).reshape(-1, 3), channel.differences(theta)
+
+
+def attitude_dependence(model: IdentificationModel, log: MeasurementLog, theta: FloatArray) -> tuple[float, float] | None:
+    """:func:`attitude_gyro_dependence` ``(rho, p)`` of the attitude's residual steps and the gyro's at ``theta`` (k)
+    of ``model`` on ``log``, the attitude as it comes (no coupling fitted); ``None`` without attitude in the log."""
+    steps = _residual_steps(model, log, theta)
+    return None if steps is None else attitude_gyro_dependence(steps[3], steps[2], np.diff(log.t_s))
+
+
 def independent_attitude_channel(
     model: IdentificationModel, log: MeasurementLog, theta: FloatArray, alpha: float
 ) -> AttitudeIndependence:
@@ -581,13 +600,11 @@ def independent_attitude_channel(
     the gyro's noise; counting them as a second measurement counted that noise twice (clean logs named gyro_scale or
     slosh), and dropping them lost what the star tracker inside the fusion measures (a gyro bias on a heavy base was
     named initial_momentum: on the gyro alone the two fit within 2 chi-square units)."""
-    channel = AttitudeChannel.of(model, log, reference=theta)
-    if channel is None:
+    steps = _residual_steps(model, log, theta)
+    if steps is None:
         return AttitudeIndependence(None, (0.0, 1.0))
-    problem = model.problem(log)
-    gyro_residual = problem.residuals(theta, count=False).reshape(-1, 3)
+    channel, problem, gyro_residual, differences = steps
     dt_s = np.diff(log.t_s)
-    differences = channel.differences(theta)
     raw = attitude_gyro_dependence(differences, gyro_residual, dt_s)
     if raw[1] >= alpha:
         return AttitudeIndependence(channel, raw)

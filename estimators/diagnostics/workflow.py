@@ -119,7 +119,8 @@ class ParameterErrors:
         inform the unknown at the truth): there is no bound to hold the error against, and ``error / inf`` = 0 read as
         a perfect estimate (payload logs of ``quick3``, whose 10 payload unknowns the arm's 3 joints do not all
         separate from the tank's position, counted as z 0 in the variation matrix's fuel z RMS)."""
-        return np.where(np.isfinite(self.crlb_std), self.error / np.where(np.isfinite(self.crlb_std), self.crlb_std, 1.0), np.nan)
+        bounded = np.isfinite(self.crlb_std)
+        return np.divide(self.error, self.crlb_std, out=np.full(self.error.shape, np.nan), where=bounded)
 
     def rows(self) -> list[dict[str, Any]]:
         return [

@@ -1,0 +1,75 @@
+"""The attitude channel's residual at the truth on one matrix log's motion, noise-free and with noise: how much of it
+the model's own prediction makes (the integration rule, the joints' motion between samples) against what the
+encoders' noise makes. Prints, per sample rate, the RMS of the residual's steps and the largest axis of their sum
+over the log (the accumulated attitude error, rad) with every noise at ``--noise-scales`` times the defaults (0.001:
+next to noise-free; the matrix's axis spans 0.3-3). The figures for the `quick3` 20 Hz exact-attitude cell in
+docs/results.md (Variation matrix) come from here. Usage::
+
+    python benchmarks/attitude_drift.py none 10713 --attitude exact --rates 20,50
+    python benchmarks/attitude_drift.py none 20001 --fix robot=quick3 --rates 20
+
+``--fix`` pins further axes as the matrix's ``--fix`` does (a seed of a run with pinned axes draws its motion with
+them pinned).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+from typing import Any
+
+import numpy as np
+
+from estimators.attitude_channel import AttitudeChannel
+from estimators.diagnostics.workflow import true_parameters
+from estimators.problem import IdentificationModel
+from spaceid_gym.errors import SpaceIdInputError
+from spaceid_gym.variations import AXIS_VALUES, draw_variation, parse_fixed, simulate_variation, truth_of
+
+
+def residual_steps(effect: str, seed: int, fixed: dict[str, Any], noise_scale: float, seconds: float) -> tuple[float, float]:
+    """(RMS of the attitude residual's steps, largest axis of their sum), rad, at the truth of the motion of the case
+    drawn with the axes ``fixed``, measured with every noise at ``noise_scale`` times the defaults."""
+    case = dataclasses.replace(draw_variation(effect, seed, fixed), noise_scale=noise_scale)
+    env = simulate_variation(case, seconds)
+    model, log = IdentificationModel(env.robot, "fuel"), env.measurement_log()
+    theta = true_parameters(model, truth_of(env))
+    channel = AttitudeChannel.of(model, log, None, theta)
+    if theta is None or channel is None:
+        raise SpaceIdInputError(f"{effect} {seed}: the case has no fuel truth or no attitude ({fixed})")
+    steps = channel.differences(theta)
+    return float(np.sqrt(np.mean(steps**2))), float(np.abs(steps.sum(axis=0)).max())
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("effect", help="the matrix row's hidden effect (none: a clean log)")
+    parser.add_argument("seed", type=int, help="the matrix row's seed (its motion and axes)")
+    parser.add_argument("--attitude", default="exact", choices=[a for a in AXIS_VALUES["attitude"] if a != "none"])
+    parser.add_argument("--rates", default="20,50", help="sample rates, Hz, comma-separated")
+    parser.add_argument("--noise-scales", default="0.001,1.0", help="noise scales, comma-separated")
+    parser.add_argument("--seconds", type=float, default=60.0)
+    parser.add_argument("--fix", default=None, help="pin further axes, e.g. 'robot=quick3'")
+    args = parser.parse_args()
+    try:
+        fixed = parse_fixed(args.fix)
+    except SpaceIdInputError as error:
+        parser.error(str(error))
+    try:
+        rates = [int(r) for r in args.rates.split(",")]
+        scales = [float(x) for x in args.noise_scales.split(",")]
+    except ValueError:
+        parser.error(f"--rates / --noise-scales: expected comma-separated numbers, got {args.rates!r}, {args.noise_scales!r}")
+    if any(r not in AXIS_VALUES["rate_hz"] for r in rates) or any(x <= 0.0 for x in scales):
+        parser.error(f"--rates: each one of {AXIS_VALUES['rate_hz']}; --noise-scales: each positive")
+    for rate in rates:
+        cells = []
+        for scale in scales:
+            axes = {**fixed, "rate_hz": rate, "attitude": args.attitude}
+            rms, drift = residual_steps(args.effect, args.seed, axes, scale, args.seconds)
+            cells.append(f"noise x{scale:g}: step RMS {rms:.2e} rad, summed {drift:.2e} rad")
+        print(f"{args.effect} {args.seed}, {rate} Hz, {args.attitude}: " + "; ".join(cells), flush=True)
+
+
+if __name__ == "__main__":
+    main()
