@@ -193,6 +193,23 @@ def test_a_pendulum_slosh_on_a_heavy_base_is_slosh() -> None:
     assert d.best.physical["slosh_frequency_hz"] == pytest.approx(0.0667, rel=0.15)
 
 
+def test_a_long_period_pendulum_with_a_tilted_rod_is_found_by_its_own_scan() -> None:
+    """Fresh log 10755 (``paper6``, 20 Hz, a 5" star tracker, 2.1 kg on a pendulum of period 37 s, its rod tilted
+    46 degrees from the base's z): the pendulum had scanned its rod only at the spring-mass's best scanned masses and
+    frequencies, which the spring (moving the mass along the rod too) put at 0.56-0.72 Hz; its fit stopped at a
+    likelihood ratio of 3.4 and the log was ``none`` (from the truth: 149). Scanning its own grid, it is ``slosh`` at
+    the pendulum's frequency, the fuel near the truth."""
+    case = draw_variation("slosh", 10755)
+    truth = case.hidden
+    assert truth.slosh_model == "pendulum" and truth.slosh_frequency_hz is not None
+    env = simulate_variation(case, 60.0)
+    d = diagnose(IdentificationModel(env.robot, "fuel"), env.measurement_log())
+    assert d.verdict == "slosh", d.reason
+    assert d.best is not None and d.best.plausible and d.best.lr_statistic > 50.0
+    assert d.best.physical["slosh_frequency_hz"] == pytest.approx(truth.slosh_frequency_hz, rel=0.3)
+    assert d.best.physical["fuel_consumed_kg"] == pytest.approx(truth_of(env)["fuel_consumed_kg"], abs=4.0)
+
+
 def test_a_payload_heavier_than_the_arm_is_named() -> None:
     """A held-out log: 11.8 kg held by quick3's 10 kg arm (50 Hz, no attitude). The payload's search box ended at
     the arm's mass and its one start was light, so gyro_scale was named with the residual 74 times the noise; the

@@ -15,7 +15,7 @@ from estimators.diagnostics.diagnose import (
     diagnose,
     simulated_variant,
 )
-from estimators.diagnostics.model_fit import GRID_STARTS, ModelFit, best_of_grid, fit_model, nuisance_basis
+from estimators.diagnostics.model_fit import ModelFit, best_of_grid, fit_model, nuisance_basis
 from estimators.diagnostics.power import candidate_spec, effect_dof
 from estimators.diagnostics.suite import DIAGNOSTIC_EXCITATION
 from estimators.diagnostics.workflow import apply_effect, parameter_errors
@@ -81,42 +81,42 @@ def _slosh_scans(model: IdentificationModel, log, theta: np.ndarray, monkeypatch
     return spring, scans
 
 
-def test_the_pendulum_scans_its_rod_at_the_spring_masss_best_points(short_fuel_episode, monkeypatch) -> None:
-    """The spring-mass has the pendulum's small lateral motions, so its scan ranks masses and frequencies as the
-    pendulum's would: the pendulum scans its rod's direction (seven axes, straight) at the spring's best scanned points,
-    with its candidates from the spring's fit (thirteen axes), instead of its own scan of every axis at every point."""
+def test_the_pendulum_scans_its_own_grid_and_the_spring_masss_fit(short_fuel_episode, monkeypatch) -> None:
+    """The pendulum scans its own grid (every mass and frequency of the spring-mass's, each with a straight rod along
+    seven axes), not only the spring's best scanned points (which ranked a tilted 37 s pendulum's frequencies wrong on
+    fresh log 10755), and adds its candidates from the spring's fit (thirteen axes)."""
     ep = short_fuel_episode
     model = IdentificationModel(ep.robot, "fuel")
     start = model.problem(ep.log).parameters.nominal
     baseline_theta = fit_model(model, ep.log, starts=[start])[0].theta
     spring, scans = _slosh_scans(model, ep.log, baseline_theta, monkeypatch)
-    n_grid = len(Slosh.GRID_FREQUENCIES_HZ) * len(Slosh.GRID_MASS_FRACTIONS)
-    assert [len(scan) for scan in scans] == [n_grid, GRID_STARTS * len(Slosh.GRID_AXES) + len(Slosh.FINE_AXES)]
-    assert len(spring.scanned) == GRID_STARTS
+    (spring_term,), (pendulum_term,) = make_terms("slosh", ep.robot), make_terms("slosh[model=pendulum]", ep.robot)
     k0 = len(baseline_theta)
-    expected = [np.concatenate((p[:k0], p[k0:], axis, [0.0])) for p in spring.scanned for axis in Slosh.GRID_AXES]
-    expected += [np.concatenate((spring.theta[:k0], spring.theta[k0:], axis, [0.0])) for axis in Slosh.FINE_AXES]
-    np.testing.assert_array_equal(np.array(scans[1]), np.array(expected))
-    (spring_term,) = make_terms("slosh", ep.robot)
-    assert spring_term.grid_from_scan(spring.scanned[0][k0:]) == []
+    own = [np.concatenate((baseline_theta, s)) for s in pendulum_term.grid(baseline_theta)]
+    assert len(own) == len(Slosh.GRID_FREQUENCIES_HZ) * len(Slosh.GRID_MASS_FRACTIONS) * len(Slosh.GRID_AXES)
+    expected = own + [np.concatenate((spring.theta[:k0], spring.theta[k0:], axis, [0.0])) for axis in Slosh.FINE_AXES]
+    np.testing.assert_allclose(np.array(scans[1]), np.array(expected), rtol=1e-9, atol=0.0)
+    n_axes = len(Slosh.GRID_AXES)
+    np.testing.assert_allclose(np.array([p[: k0 + 3] for p in own[::n_axes]]), np.array(scans[0]), rtol=1e-9, atol=0.0)
+    assert spring_term.grid_from_variant(spring.theta[k0:]) == []
 
 
 def test_with_no_liquid_left_the_pendulum_scans_where_the_spring_mass_did(short_fuel_episode, monkeypatch) -> None:
-    """A baseline with all the usable fuel consumed leaves no liquid to slosh: the spring-mass scans at points on the
-    way to the interior start instead, and the pendulum's rods are scanned at those points' own base unknowns, not at
-    the baseline's."""
+    """A baseline with all the usable fuel consumed leaves no liquid to slosh: both models scan at points on the way
+    to the interior start instead, the same points, at those points' own base unknowns, not at the baseline's."""
     ep = short_fuel_episode
     model = IdentificationModel(ep.robot, "fuel")
     problem = model.problem(ep.log)
     empty = problem.parameters.nominal.copy()
     empty[0] = problem.parameters.upper[0]  # the fuel consumed at its bound: the usable fuel
-    spring, scans = _slosh_scans(model, ep.log, empty, monkeypatch)
+    _, scans = _slosh_scans(model, ep.log, empty, monkeypatch)
     spring_term = candidate_model(model, "slosh").parameters.terms[-1]  # type: ignore[attr-defined]
     assert spring_term.grid(empty) == [] and len(scans[0]) == len(SCAN_SHARES_TOWARD_INTERIOR) * len(spring_term.grid())
     k0 = len(empty)
-    assert all(not np.array_equal(p[:k0], empty) for p in spring.scanned)
-    expected = [np.concatenate((p, axis, [0.0])) for p in spring.scanned for axis in Slosh.GRID_AXES]
-    np.testing.assert_array_equal(np.array(scans[1][: len(expected)]), np.array(expected))
+    assert all(not np.array_equal(p[:k0], empty) for p in scans[0])
+    n_axes = len(Slosh.GRID_AXES)
+    pendulum_own = scans[1][: len(scans[0]) * n_axes]
+    np.testing.assert_allclose(np.array([p[: k0 + 3] for p in pendulum_own[::n_axes]]), np.array(scans[0]), rtol=1e-9, atol=0.0)
 
 
 def test_the_power_tests_the_model_that_made_the_effect(paper6: Robot) -> None:

@@ -572,7 +572,6 @@ def _better_of_refit(
     )[0]
     better = refit if _chi2(refit, white_std * white_std) < _chi2(fit, white_std * white_std) else fit
     better.wall_time_s = fit.wall_time_s + refit.wall_time_s
-    better.scanned = fit.scanned
     return better
 
 
@@ -628,11 +627,13 @@ def _fit_candidate(
     """``model`` with the effect ``spec`` added, fitted from the baseline's fit, from the best of the term's grid and
     once from the default start (a missing effect can drag the baseline far off). The grid includes the term's
     candidates from the fits of the ``other_variants`` (:meth:`~estimators.models.effect_base.EffectTerm.grid_from_variant`:
-    a slosh pendulum from the spring-mass's fit, the rod along each of a finer set of axes), and its scan is read from
-    theirs where the term can (:meth:`~estimators.models.effect_base.EffectTerm.grid_from_scan`: the pendulum's rod
-    along each of seven axes at the spring-mass's best scanned masses and frequencies). The grid is scored with
-    the model's own unknowns profiled out to first order on ``basis`` (:func:`~estimators.diagnostics.model_fit.nuisance_basis`
-    at the baseline)."""
+    a slosh pendulum from the spring-mass's fit, the rod along each of a finer set of axes). Each variant scans its own
+    grid: the spring-mass's best scanned points do not rank the pendulum's masses and frequencies as the pendulum's
+    scan does, since the spring moves the mass along the rod too (fresh log 10755, ``paper6``, a 5" tracker, a 37 s
+    pendulum whose rod is tilted: the spring ranked 0.56-0.72 Hz first, the pendulum's fit from there stopped at a
+    likelihood ratio of 3.4, its own scan ranks 0.026-0.033 Hz first and the fit from the truth reaches 149). The grid
+    is scored with the model's own unknowns profiled out to first order on ``basis``
+    (:func:`~estimators.diagnostics.model_fit.nuisance_basis` at the baseline)."""
     extended = candidate_model(model, spec)
     params = extended.parameters
     assert isinstance(params, WithEffects)
@@ -641,10 +642,7 @@ def _fit_candidate(
     k_base = params.base.n_params
     problem = extended.problem(log)
     n0 = len(baseline.theta)  # the model's own unknowns (base and effects already in it), then the candidate's
-    # another variant's scan stands for this term's own where the term reads candidates from it
-    grid = [np.concatenate((p[:n0], s)) for v in other_variants for p in v.scanned for s in term.grid_from_scan(p[n0:])]
-    if not grid:
-        grid = [np.concatenate((baseline.theta, s)) for s in term.grid(baseline.theta[:k_base])]
+    grid = [np.concatenate((baseline.theta, s)) for s in term.grid(baseline.theta[:k_base])]
     if not grid:
         # the term cannot act at the baseline (a missing slosh can drag it to the fuel bound: no liquid left): the scan
         # at points on the way from the baseline to the interior start instead
@@ -656,9 +654,7 @@ def _fit_candidate(
     scanned = best_of_grid(problem, grid, extended_channel, weights, basis)
     starts = [*scanned, np.concatenate((restart, term.starts(restart[:k_base])[0]))]
     starts.append(np.concatenate((baseline.theta, term.nominal)))  # the baseline itself: the nested model's fit
-    fit = fit_model(extended, log, starts=starts, effect=term.name, weights=weights, problem=problem, profile_noise=True)[0]
-    fit.scanned = [p.copy() for p in scanned]  # not views of the whole scan
-    return fit
+    return fit_model(extended, log, starts=starts, effect=term.name, weights=weights, problem=problem, profile_noise=True)[0]
 
 
 def _analyse_fit(

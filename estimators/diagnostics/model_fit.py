@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -137,8 +137,6 @@ class ModelFit(CandidateScores):
         attitude_white_p: p-value of the attitude residual, whitened by its error model, against unit white noise in
             the effects' band (:func:`low_frequency_p_value`): small when the attitude source's errors are not what
             the model assumes (``nan``: no attitude).
-        scanned: the best points (each (k,)) of the candidate's scan (:func:`best_of_grid`), which started its fit
-            (empty for a fit without a scan); a refit of the candidate keeps its first fit's.
     """
 
     effects: tuple[str, ...]
@@ -158,7 +156,6 @@ class ModelFit(CandidateScores):
     attitude_white_p: float = math.nan  # the whitened attitude residual's low-frequency test (:func:`low_frequency_p_value`)
     attitude_noise: ErrorModel | None = None  # the attitude error model refitted at this fit
     attitude_chi2_held: float | None = None  # the attitude chi-square under the weights' error model, held
-    scanned: list[FloatArray] = field(default_factory=list)  # the best points of the candidate's scan, which started its fit
 
     @property
     def residual_rms_rad_s(self) -> float:
@@ -623,8 +620,7 @@ def independent_attitude_channel(
 #: how many of a term's grid candidates (:meth:`~estimators.models.effect_models.EffectTerm.grid`) start local fits
 GRID_STARTS = 3
 
-#: candidates per batched evaluation of a grid (:func:`best_of_grid`): measured when the pendulum scanned 412 of its own
-#: (before it read its scan from the spring-mass's): all at once, on a 60 s log at 50 Hz, they allocated arrays of
+#: candidates per batched evaluation of a grid (:func:`best_of_grid`): measured with the pendulum's scan of 412: all at once, on a 60 s log at 50 Hz, they allocated arrays of
 #: 100 MB and cost 1.5 times as much as in batches of 64; batches of 32 cost 0.61-0.74 times what batches of 64 did
 #: (on the benchmark's log, ``benchmarks/diagnose_speed.py``), of 16 about as much as 32. The scores do not depend on
 #: the batch with one BLAS thread, as :func:`~estimators.diagnostics.diagnose.diagnose` runs (with more, the

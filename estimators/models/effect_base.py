@@ -136,13 +136,6 @@ class EffectTerm(ABC):
         them (e.g. a slosh pendulum from a spring-mass fit); none by default."""
         return []
 
-    def grid_from_scan(self, scanned: FloatArray) -> list[FloatArray]:
-        """Candidates (k_e,) from ``scanned``, this effect's unknowns at one of the best points of another equivalent
-        model's scan (:meth:`grid`), where that model ranks the points as this one would; none by default. Where a
-        term gives any, they stand for its own scan (a slosh pendulum's rod directions at the spring-mass's best
-        masses and frequencies)."""
-        return []
-
     def from_truth(self, hidden: Mapping[str, Any]) -> FloatArray:
         """This term's unknowns (k_e,) in a simulated truth: ``hidden`` is ``truth.json``'s ``hidden_effects``.
 

@@ -293,26 +293,13 @@ class Slosh(EffectTerm):
     def grid_from_variant(self, fitted: FloatArray) -> list[FloatArray]:
         """The pendulum's candidates (6,) with the mass, frequency and damping of ``fitted`` (the first three values: a
         fit of the other slosh model, whose small lateral motions are the same) and a straight rod along each of
-        :data:`FINE_AXES`; none for the spring."""
-        return self._rods(fitted, self.FINE_AXES)
-
-    def grid_from_scan(self, scanned: FloatArray) -> list[FloatArray]:
-        """The pendulum's candidates (6,) with the mass, frequency and damping of ``scanned`` (a best point of the
-        spring-mass's scan, which has the pendulum's small lateral motions and so ranks the scan's masses and
-        frequencies as the pendulum's own would) and a straight rod along each of :data:`GRID_AXES`; none for the
-        spring. They replace the pendulum's own scan (:meth:`grid`), which has 19 times as many (the pendulum's whole
-        grid, with the 13 of :meth:`grid_from_variant`, 34 candidates instead of 412): on 20 design logs with a
-        pendulum slosh (seeds 10481-10541, 20-100 Hz, every attitude source) the pendulum's fit from them was
-        the one from its own scan to 1e-4 units of ``-2 log L``, on one 0.06 units better; on a payload log (10549)
-        the pendulum's fit of the payload's motion ended 9.7 units worse, and the payload was named as before."""
-        return self._rods(scanned, self.GRID_AXES)
-
-    def _rods(self, values: FloatArray, axes: tuple[tuple[float, float], ...]) -> list[FloatArray]:
-        """The pendulum's unknowns (6,) with the first three of ``values`` and a straight rod along each of ``axes``
-        (azimuth, elevation; rad); none for the spring."""
+        :data:`FINE_AXES`; none for the spring. They add to the pendulum's own scan (:meth:`grid`), not stand for it:
+        the spring also moves the mass along the rod, and its best scanned masses and frequencies were not the
+        pendulum's on fresh log 10755 (a 37 s pendulum, the rod tilted; see
+        :func:`~estimators.diagnostics.diagnose.diagnose`)."""
         if not self.has_rod:
             return []
-        return [np.array([*np.asarray(values, dtype=float)[:3], *axis, 0.0]) for axis in axes]
+        return [np.array([*np.asarray(fitted, dtype=float)[:3], *axis, 0.0]) for axis in self.FINE_AXES]
 
     def momentum(
         self, twist: FloatArray, theta: FloatArray, tank_m: FloatArray, composite10: FloatArray, context: EffectContext
