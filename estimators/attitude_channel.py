@@ -522,7 +522,15 @@ class AttitudeChannel:
     def residuals(self, theta: FloatArray, noise: ErrorModel) -> FloatArray:
         """The whitened differences (3T-6,) at ``theta`` (k,), in the noise axes: unit variance and independent under
         ``noise``."""
-        return self._whiten(self._in_axes(self.differences(theta)), noise).ravel()
+        return self.whitened_steps(self.differences(theta), noise)
+
+    def whitened_steps(self, steps: FloatArray, noise: ErrorModel) -> FloatArray:
+        """Steps (T-1, 3), or their derivatives (T-1, 3, k), vectors in the first sample's frame, whitened under ``noise``
+        as :meth:`residuals` and :meth:`jacobian` whiten the channel's own: (3T-6,) or (3T-6, k)."""
+        steps = np.asarray(steps, dtype=float)
+        if steps.ndim == 2:
+            return self._whiten(self._in_axes(steps), noise).ravel()
+        return self._whiten(self._jacobian_in_axes(steps), noise).reshape(-1, steps.shape[2])
 
     def moved_chi2(self, other: AttitudeChannel, theta: FloatArray, noise: ErrorModel) -> float:
         """How much ``other`` (this log's channel at another reference) moves the residual at ``theta`` (k,): the
@@ -550,8 +558,7 @@ class AttitudeChannel:
 
     def jacobian(self, theta: FloatArray, noise: ErrorModel) -> FloatArray:
         """``d residuals / d theta`` (3T-6, k) at ``theta`` (k,)."""
-        jac = self._jacobian_in_axes(self.difference_jacobian(theta))
-        return self._whiten(jac, noise).reshape(-1, jac.shape[2])
+        return self.whitened_steps(self.difference_jacobian(theta), noise)
 
     def chi2(self, theta: FloatArray, noise: ErrorModel) -> float:
         """The channel's chi-square at ``theta`` (k,) under ``noise`` (``n_values`` degrees of freedom at the truth)."""
