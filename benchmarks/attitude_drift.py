@@ -14,6 +14,10 @@ systematic error (the simulator's integrator, the joints' path between samples) 
     python benchmarks/attitude_drift.py none 10713 --attitude exact --rates 20,50
     python benchmarks/attitude_drift.py none 20001 --fix robot=quick3 --rates 20
     python benchmarks/attitude_drift.py none 10713 --rates 20,50 --noise-scales 0.3,1,2.14 --momentum
+    python benchmarks/attitude_drift.py none 10713 --rates 20 --noise-scales 1e-6,2.14 --momentum --substeps 8
+
+``--substeps`` simulates with that many integration steps per sample (the simulator's default is one): what is left
+is the channel's own error, the joints' path between samples.
 
 ``--fix`` pins further axes as the matrix's ``--fix`` does (a seed of a run with pinned axes draws its motion with
 them pinned).
@@ -41,12 +45,13 @@ NOISE_FREE_SCALE = 1e-6
 
 
 def truth_residual(
-    effect: str, seed: int, fixed: dict[str, Any], noise_scale: float, seconds: float
+    effect: str, seed: int, fixed: dict[str, Any], noise_scale: float, seconds: float, substeps: int = 1
 ) -> tuple[IdentificationModel, MeasurementLog, FloatArray, FloatArray]:
     """The model, log, true unknowns and the attitude residual's steps (T-1, 3), rad, at the truth of the motion of the
-    case drawn with the axes ``fixed``, measured with every noise at ``noise_scale`` times the defaults."""
+    case drawn with the axes ``fixed``, measured with every noise at ``noise_scale`` times the defaults, simulated with
+    ``substeps`` integration steps per sample."""
     case = dataclasses.replace(draw_variation(effect, seed, fixed), noise_scale=noise_scale)
-    env = simulate_variation(case, seconds)
+    env = simulate_variation(case, seconds, integration_substeps=substeps)
     model, log = IdentificationModel(env.robot, "fuel"), env.measurement_log()
     theta = true_parameters(model, truth_of(env))
     channel = AttitudeChannel.of(model, log, None, theta)
@@ -81,6 +86,7 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=60.0)
     parser.add_argument("--fix", default=None, help="pin further axes, e.g. 'robot=quick3'")
     parser.add_argument("--momentum", action="store_true", help="also a momentum's likelihood ratio at the truth")
+    parser.add_argument("--substeps", type=int, default=1, help="the simulator's integration steps per sample")
     args = parser.parse_args()
     try:
         fixed = parse_fixed(args.fix)
@@ -95,16 +101,21 @@ def main() -> None:
         parser.error(f"--rates: each one of {AXIS_VALUES['rate_hz']}; --noise-scales: each positive")
     for rate in rates:
         axes = {**fixed, "rate_hz": rate, "attitude": args.attitude}
-        noise_free = truth_residual(args.effect, args.seed, axes, NOISE_FREE_SCALE, args.seconds)[3] if args.momentum else None
+        noise_free = (
+            truth_residual(args.effect, args.seed, axes, NOISE_FREE_SCALE, args.seconds, args.substeps)[3]
+            if args.momentum
+            else None
+        )
         cells = []
         for scale in scales:
-            model, log, theta, steps = truth_residual(args.effect, args.seed, axes, scale, args.seconds)
+            model, log, theta, steps = truth_residual(args.effect, args.seed, axes, scale, args.seconds, args.substeps)
             cell = f"noise x{scale:g}: step RMS {np.sqrt(np.mean(steps**2)):.2e} rad, summed {np.abs(steps.sum(axis=0)).max():.2e} rad"
             if noise_free is not None:
                 logged, without = (momentum_ratio(model, log, theta, removed) for removed in (None, noise_free))
                 cell += f", momentum LR at the truth {logged:.1f} ({without:.1f} without the noise-free residual)"
             cells.append(cell)
-        print(f"{args.effect} {args.seed}, {rate} Hz, {args.attitude}: " + "; ".join(cells), flush=True)
+        head = f"{args.effect} {args.seed}, {rate} Hz, {args.attitude}, {args.substeps} integration step(s) a sample"
+        print(f"{head}: " + "; ".join(cells), flush=True)
 
 
 if __name__ == "__main__":

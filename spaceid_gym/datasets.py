@@ -50,6 +50,7 @@ def simulate_episode(
     control_period_s: float = 0.02,
     hidden_effects: HiddenEffects | str | None = None,
     noise_seed: int | None = None,
+    integration_substeps: int = 1,
 ) -> FreeFloatingIDEnv:
     """Run one identification window in :class:`FreeFloatingIDEnv` and return the env after it.
 
@@ -60,7 +61,7 @@ def simulate_episode(
     env; :func:`write_episode_dataset` then writes them to truth.json (``hidden_effects``). ``noise_seed``: the
     measurement noise from a generator of its own (the env's reset option): the same motion with new noise for an
     excitation that is a function of time (a :class:`FeedbackExcitation` acts on the noisy measurements, so its
-    motion changes with them).
+    motion changes with them). ``integration_substeps``: the env's (the simulator's steps per control period).
     """
     n_steps = check_log_size(duration_s, control_period_s, robot.n_joints)
     env = FreeFloatingIDEnv(
@@ -69,6 +70,7 @@ def simulate_episode(
         sensors=sensors,
         tank_position_m=tank_position_m,
         hidden_effects=hidden_effects,
+        integration_substeps=integration_substeps,
     )
     options: dict[str, Any] = {"fuel_consumed_kg": fuel_consumed_kg}
     if noise_seed is not None:

@@ -303,10 +303,13 @@ def draw_variation(effect: str, seed: int, fixed: Mapping[str, Any] | None = Non
     )
 
 
-def simulate_variation(case: VariationCase, duration_s: float = 60.0, noise_seed: int | None = None) -> FreeFloatingIDEnv:
+def simulate_variation(
+    case: VariationCase, duration_s: float = 60.0, noise_seed: int | None = None, integration_substeps: int = 1
+) -> FreeFloatingIDEnv:
     """Simulate the case's log of ``duration_s`` at its rate: the env after the window (its ``measurement_log()``,
     ``truth()``, ``sensors`` and ``hidden_effects``; :func:`truth_of` for truth.json's fields). ``noise_seed``: the
-    same motion measured with noise from a generator of its own (default: the case's seed draws both)."""
+    same motion measured with noise from a generator of its own (default: the case's seed draws both);
+    ``integration_substeps``: the simulator's steps per control period (the env's)."""
     if not isinstance(case, VariationCase):
         raise SpaceIdInputError(f"simulate_variation: expected a VariationCase, got {type(case).__name__}")
     robot = load_robot(case.robot)
@@ -321,6 +324,7 @@ def simulate_variation(case: VariationCase, duration_s: float = 60.0, noise_seed
         control_period_s=case.control_period_s,
         hidden_effects=case.hidden,
         noise_seed=noise_seed,
+        integration_substeps=integration_substeps,
     )
 
 

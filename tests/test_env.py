@@ -148,6 +148,26 @@ def test_bad_constructor_options_are_named() -> None:
     for bad in (-1, 1.5, "3", True):
         with pytest.raises(ValueError, match="noise_seed"):
             env.reset(seed=0, options={"noise_seed": bad})
+    for bad in (0, 1.5, "3", True):
+        with pytest.raises(ValueError, match="integration_substeps"):
+            FreeFloatingIDEnv(robot="quick3", integration_substeps=bad)
+
+
+def test_integration_substeps_reach_the_simulator_and_refine_the_attitude() -> None:
+    """``integration_substeps``: the simulator's RKMK4 steps per control period; at 20 Hz the attitude after 2 s of a
+    brisk motion comes closer to a 32-step reference by more than a factor 1000 from 1 to 8 steps (fourth order: 4096)."""
+
+    def final_attitude(substeps: int) -> np.ndarray:
+        env = FreeFloatingIDEnv(robot="quick3", control_period_s=0.05, sensors="noise_free", integration_substeps=substeps)
+        env.reset(seed=3)
+        assert env.simulator.substeps == substeps
+        for k in range(40):
+            env.step(np.full(env.robot.n_joints, math.sin(0.7 * k), dtype=np.float32))
+        return env.simulator.state.rot_wb.copy()
+
+    reference = final_attitude(32)
+    one, eight = (np.linalg.norm(final_attitude(n) - reference) for n in (1, 8))
+    assert one > 1000.0 * eight, (one, eight)
 
 
 def test_a_noise_seed_measures_the_same_motion_with_new_noise() -> None:

@@ -133,7 +133,10 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     ``"noise_free"``), ``fuel_schedule`` (:class:`~spaceid_gym.mission.FuelSchedule`),
     ``tank_position_m`` (fixed tank, default drawn per satellite), ``reward_weights``
     (:class:`RewardWeights`), ``render_mode`` (``"rgb_array"`` or ``None``), ``hidden_effects`` (see
-    *Hidden effects*; default none). The measurement log of the current episode: :meth:`measurement_log`.
+    *Hidden effects*; default none), ``integration_substeps`` (1: RKMK4 steps of the base's attitude, and of a
+    slosh, per control period; the joints' motion is exact between samples. On ``quick3`` at 20 Hz, noise-free, one
+    step leaves the attitude channel's residual at the truth at 1.9e-9 rad a step, eight at 8.1e-11:
+    ``benchmarks/attitude_drift.py --substeps``). The measurement log of the current episode: :meth:`measurement_log`.
 
     ## Identification
     The env is the physics and the sensors only: it imports no estimator. ``gym.make("FreeFloatingID-v0",
@@ -155,8 +158,12 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         reward_weights: RewardWeights | None = None,
         render_mode: str | None = None,
         hidden_effects: HiddenEffects | str | None = None,
+        integration_substeps: int = 1,
     ) -> None:
         self.robot = robot if isinstance(robot, Robot) else load_robot(robot)
+        if isinstance(integration_substeps, bool) or not isinstance(integration_substeps, int) or integration_substeps < 1:
+            raise SpaceIdInputError(f"integration_substeps: expected an integer >= 1, got {integration_substeps!r}")
+        self.integration_substeps = integration_substeps
         if not (np.isfinite(control_period_s) and control_period_s > 0.0):
             raise SpaceIdInputError(f"control_period_s: expected a positive number of seconds, got {control_period_s!r}")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -239,7 +246,13 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             )
         base = base_after_fuel(base_full, fuel, tank)  # validates before any state changes
         effects = self._draw_effects(fuel)
-        simulator = FreeFloatingSimulator(self.robot, base, effects=effects, tank_point_m=np.asarray(base_full.com_m) + tank)
+        simulator = FreeFloatingSimulator(
+            self.robot,
+            base,
+            substeps=self.integration_substeps,
+            effects=effects,
+            tank_point_m=np.asarray(base_full.com_m) + tank,
+        )
         self._tank, self._fuel_consumed_kg, self._episode = tank, fuel, episode
         self._effects, self.simulator = effects, simulator
         theta = np.concatenate(([self._fuel_consumed_kg], self._tank))
