@@ -209,6 +209,7 @@ def fit_model(
     problem: IdentificationProblem | None = None,
     profile_noise: bool = False,
     each_basin: bool = False,
+    noise_start: ErrorModel | None = None,
 ) -> tuple[ModelFit, Estimate | None]:
     """Fit ``model`` to ``log``: with ``estimator`` (returns its estimate), or by least squares from each of ``starts``.
 
@@ -225,7 +226,9 @@ def fit_model(
     without it only the best of them by both channels at the weights' error model is. The two channels' optima can
     lie far apart within a basin: on held-out log 9709 (orbit7, an exact attitude at 100 Hz, a 127 kg pendulum slosh)
     the gyro's minimum with the tank mirrored scored 459 units better at the baseline's error model than the true
-    basin's, and 781 units worse once each was refined on both channels.
+    basin's, and 781 units worse once each was refined on both channels. ``noise_start``: with ``profile_noise``, the
+    error model the starts are scored and refined under and its refit starts from, instead of ``weights``' (which stays
+    the reference of the profile chi-square).
     """
     begin = time.perf_counter()
     problem = model.problem(log) if problem is None else problem
@@ -266,12 +269,13 @@ def fit_model(
             assert weights is not None
             # the gyro's minimum nearest each start, the best of them by both channels, refined on both; then the
             # attitude error model refitted at this model's fit and the fit refined under it (profile likelihood)
+            search = weights if noise_start is None or not profile_noise else replace(weights, attitude=noise_start)
             tried = [*results, *(np.clip(x, problem.parameters.lower, problem.parameters.upper) for x in starts)]
-            scores = [joint_chi2(problem, channel, weights, x) for x in tried]
-            theta = _joint_fit(problem, channel, weights, tried[int(np.argmin(scores))])
+            scores = [joint_chi2(problem, channel, search, x) for x in tried]
+            theta = _joint_fit(problem, channel, search, tried[int(np.argmin(scores))])
             if profile_noise:
-                # the error model polished from the weights' to weigh the refinement (the score's own comes after it)
-                own = replace(weights, attitude=channel.estimate_noise(theta, weights.attitude, only_from_start=True))
+                # the error model polished from the search's to weigh the refinement (the score's own comes after it)
+                own = replace(weights, attitude=channel.estimate_noise(theta, search.attitude, only_from_start=True))
                 theta = _joint_fit(problem, channel, own, theta)
         else:
             scores = [float(r @ r) for r in (problem.residuals(x, count=False) for x in results)]
