@@ -62,8 +62,8 @@ def truth_residual(
 
 def momentum_ratio(model: IdentificationModel, log: MeasurementLog, theta: FloatArray, removed: FloatArray | None) -> float:
     """The likelihood ratio of an initial momentum on the attitude channel at the truth ``theta`` (the base's unknowns
-    held there; the error model fitted to the residual there), with the steps ``removed`` (T-1, 3) taken out of the
-    residual first if given."""
+    held there; the error model fitted to the residual there as logged, so that with the steps ``removed`` (T-1, 3)
+    taken out of the residual the error model still holds what its wander absorbed of them)."""
     extended = candidate_model(model, "initial_momentum")
     at_truth = np.concatenate((theta, np.zeros(extended.parameters.n_params - len(theta))))
     channel = AttitudeChannel.of(extended, log, None, theta)
@@ -92,6 +92,8 @@ def main() -> None:
         fixed = parse_fixed(args.fix)
     except SpaceIdInputError as error:
         parser.error(str(error))
+    if args.substeps < 1:
+        parser.error(f"--substeps: expected an integer >= 1, got {args.substeps}")
     try:
         rates = [int(r) for r in args.rates.split(",")]
         scales = [float(x) for x in args.noise_scales.split(",")]

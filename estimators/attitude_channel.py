@@ -584,6 +584,14 @@ class AttitudeChannel:
         jac = self.jacobian(theta, noise)
         return jac.T @ jac
 
+    def estimate_propagated_noise(self, theta: FloatArray) -> PropagatedNoise:
+        """The propagated error model fitted to the residual at ``theta`` (k,) from its default starts, whatever error
+        model the channel was weighed with (:func:`~estimators.attitude_propagation.fit_propagated_noise`).
+
+        Raises:
+            SpaceIdInputError: a channel without the encoders' propagation (coupled to the gyro)."""
+        return fit_propagated_noise(self._in_axes(self.differences(theta)), self._require_propagation())
+
     def estimate_noise(self, theta: FloatArray, start: ErrorModel | None = None, only_from_start: bool = False) -> ErrorModel:
         """The error model fitted to the residual at ``theta`` (k,) by maximum likelihood. With a ``start`` (a nearby
         fit's error model), of ``start``'s kind: a stationary one tried as one more start (the only one with

@@ -153,8 +153,8 @@ def test_the_attitude_channel_takes_its_integration_error_out_at_the_two_channel
     """Held-out log 9762 (``quick3``, an exact attitude at 50 Hz, an 18.6 ms delay; here 30 s of it): the gyro alone
     puts the fuel at 10.0 kg for 15.74 kg, and the channel took the midpoint rule's error out to first order about that
     fit. What was left moved the named delay's fuel unknowns by up to 3.5 Cramér-Rao std. The channel is now referenced
-    at the two-channel baseline: the fit agrees with the fit of a channel referenced at the truth within a fifth of a
-    std (2.5 std on the old code). The refits start the error model from the fit's own."""
+    at the two-channel baseline: a refit from the named fit there agrees with one under a channel referenced at the
+    truth within a fifth of a std (2.5 std on the old code). The refits start the error model from the fit's own."""
     env = simulate_variation(draw_variation("delay", 9762), 30.0)
     model, log = IdentificationModel(env.robot, "fuel"), env.measurement_log()
     d = diagnose(model, log, candidates=["delay"])

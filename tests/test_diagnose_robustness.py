@@ -46,11 +46,11 @@ from estimators.attitude_noise import (
 from estimators.attitude_propagation import PropagatedNoise
 from estimators.diagnostics.diagnose import (
     NO_MISSING_EFFECT,
-    STRONG_EFFECT_P,
     attitude_gyro_dependence,
     diagnose,
     low_frequency_p_value,
 )
+from estimators.diagnostics.model_fit import ChannelWeights, ModelFit
 from estimators.diagnostics.suite import DIAGNOSTIC_EXCITATION
 from estimators.diagnostics.workflow import true_parameters
 from estimators.problem import IdentificationModel
@@ -585,22 +585,30 @@ def test_a_fused_attitude_too_short_for_its_coupling_leaves_the_verdict_to_the_g
 def test_a_strong_effect_is_refitted_under_an_attitude_error_model_of_its_own(monkeypatch: pytest.MonkeyPatch) -> None:
     """A missing effect strong enough shapes the baseline's propagated error model (an exact attitude), and a
     candidate's refit keeps that model: fresh log 10839 (a 11.7 kg payload on ``orbit7``, 60 s at 50 Hz) was named a
-    gyro scale, its payload fit 20 kg off in the fuel. A candidate whose ratio against the baseline has p below
-    STRONG_EFFECT_P is fitted again with its error model searched afresh at its fit, and the better of the two kept;
-    a weak one is not. Here a strong momentum on 20 s of ``quick3`` with a noise-free attitude."""
-    calls: list[tuple[str | None, bool]] = []
-    real_fit_model = diagnose_module.fit_model
+    gyro scale, its payload fit 20 kg off in the fuel. A candidate whose profile ratio against the baseline has p below
+    STRONG_EFFECT_P is fitted again with a propagated error model searched afresh at its fit; a weak one is not. Here
+    a strong momentum on 20 s of ``quick3`` with a noise-free attitude."""
+    decisions: list[tuple[str | None, bool]] = []
+    searched: list[int] = []
+    real_strong = diagnose_module._strong
+    real_search = AttitudeChannel.estimate_propagated_noise
 
-    def recorded(*args, **kwargs):  # type: ignore[no-untyped-def]
-        calls.append((kwargs.get("effect"), kwargs.get("noise_start") is not None))
-        return real_fit_model(*args, **kwargs)
+    def strong(fit: ModelFit, baseline: ModelFit, weights: ChannelWeights) -> bool:
+        decisions.append((fit.effect, real_strong(fit, baseline, weights)))
+        return decisions[-1][1]
 
-    monkeypatch.setattr(diagnose_module, "fit_model", recorded)
+    def search(channel: AttitudeChannel, theta: np.ndarray) -> PropagatedNoise:
+        searched.append(1)
+        return real_search(channel, theta)
+
+    monkeypatch.setattr(diagnose_module, "_strong", strong)
+    monkeypatch.setattr(AttitudeChannel, "estimate_propagated_noise", search)
     quick3 = load_robot("quick3")
     d = diagnose(IdentificationModel(quick3, "fuel"), _log(quick3, "initial_momentum[magnitude=0.05]", "exact", duration_s=20.0))
     assert d.verdict == "initial_momentum", d.reason
     assert d.weights is not None and isinstance(d.weights.attitude, PropagatedNoise)
-    afresh = {effect for effect, fresh in calls if fresh}
-    assert "initial_momentum" in afresh
-    weak = {f.effect for f in d.candidates if f.p_value > STRONG_EFFECT_P}
-    assert weak and not weak & afresh, (weak, afresh)
+    assert ("initial_momentum", True) in decisions
+    assert any(not is_strong for _, is_strong in decisions), decisions
+    assert len(searched) == sum(is_strong for _, is_strong in decisions)
+    momentum = d.fit_of("initial_momentum")
+    assert momentum is not None and isinstance(momentum.attitude_noise, PropagatedNoise)

@@ -90,7 +90,8 @@ def test_the_pendulum_scans_its_own_grid_and_the_spring_masss_fit(short_fuel_epi
     start = model.problem(ep.log).parameters.nominal
     baseline_theta = fit_model(model, ep.log, starts=[start])[0].theta
     spring, scans = _slosh_scans(model, ep.log, baseline_theta, monkeypatch)
-    (spring_term,), (pendulum_term,) = make_terms("slosh", ep.robot), make_terms("slosh[model=pendulum]", ep.robot)
+    (spring_term,) = make_terms("slosh", ep.robot)
+    pendulum_term = candidate_model(model, "slosh[model=pendulum]").parameters.terms[-1]  # type: ignore[attr-defined]
     k0 = len(baseline_theta)
     own = [np.concatenate((baseline_theta, s)) for s in pendulum_term.grid(baseline_theta)]
     assert len(own) == len(Slosh.GRID_FREQUENCIES_HZ) * len(Slosh.GRID_MASS_FRACTIONS) * len(Slosh.GRID_AXES)

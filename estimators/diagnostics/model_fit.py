@@ -228,7 +228,7 @@ def fit_model(
     the gyro's minimum with the tank mirrored scored 459 units better at the baseline's error model than the true
     basin's, and 781 units worse once each was refined on both channels. ``noise_start``: with ``profile_noise``, the
     error model the starts are scored and refined under and its refit starts from, instead of ``weights``' (which stays
-    the reference of the profile chi-square).
+    the reference of the profile chi-square); unused without ``weights`` or with an ``estimator``.
     """
     begin = time.perf_counter()
     problem = model.problem(log) if problem is None else problem
@@ -258,6 +258,7 @@ def fit_model(
                     channel=channel,
                     problem=problem,
                     profile_noise=profile_noise,
+                    noise_start=noise_start,
                 )[0]
                 for b in basins
             ]
@@ -624,8 +625,8 @@ def independent_attitude_channel(
 #: how many of a term's grid candidates (:meth:`~estimators.models.effect_models.EffectTerm.grid`) start local fits
 GRID_STARTS = 3
 
-#: candidates per batched evaluation of a grid (:func:`best_of_grid`): measured with the pendulum's scan of 412: all at once, on a 60 s log at 50 Hz, they allocated arrays of
-#: 100 MB and cost 1.5 times as much as in batches of 64; batches of 32 cost 0.61-0.74 times what batches of 64 did
+#: candidates per batched evaluation of a grid (:func:`best_of_grid`): measured with the pendulum's scan of 412: all
+#: at once, on a 60 s log at 50 Hz, they allocated arrays of 100 MB and cost 1.5 times as much as in batches of 64; batches of 32 cost 0.61-0.74 times what batches of 64 did
 #: (on the benchmark's log, ``benchmarks/diagnose_speed.py``), of 16 about as much as 32. The scores do not depend on
 #: the batch with one BLAS thread, as :func:`~estimators.diagnostics.diagnose.diagnose` runs (with more, the
 #: projection's product may differ in its last bit)

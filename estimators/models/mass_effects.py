@@ -295,8 +295,8 @@ class Slosh(EffectTerm):
         fit of the other slosh model, whose small lateral motions are the same) and a straight rod along each of
         :data:`FINE_AXES`; none for the spring. They add to the pendulum's own scan (:meth:`grid`), not stand for it:
         the spring also moves the mass along the rod, and its best scanned masses and frequencies were not the
-        pendulum's on fresh log 10755 (a 37 s pendulum, the rod tilted; see
-        :func:`~estimators.diagnostics.diagnose.diagnose`)."""
+        pendulum's on fresh log 10755 (a 37 s pendulum, the rod tilted; see the diagnosis's candidate fits,
+        ``estimators/diagnostics/diagnose.py``)."""
         if not self.has_rod:
             return []
         return [np.array([*np.asarray(fitted, dtype=float)[:3], *axis, 0.0]) for axis in self.FINE_AXES]

@@ -134,9 +134,9 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     ``tank_position_m`` (fixed tank, default drawn per satellite), ``reward_weights``
     (:class:`RewardWeights`), ``render_mode`` (``"rgb_array"`` or ``None``), ``hidden_effects`` (see
     *Hidden effects*; default none), ``integration_substeps`` (1: RKMK4 steps of the base's attitude, and of a
-    slosh, per control period; the joints' motion is exact between samples. On ``quick3`` at 20 Hz, noise-free, one
-    step leaves the attitude channel's residual at the truth at 1.9e-9 rad a step, eight at 8.1e-11:
-    ``benchmarks/attitude_drift.py --substeps``). The measurement log of the current episode: :meth:`measurement_log`.
+    slosh, per smooth piece of a control period, the pieces between the servo's switch times; the joints' motion is
+    exact. On clean matrix log 10713's motion, ``quick3`` at 20 Hz noise-free, one step leaves the attitude channel's
+    residual at the truth at 1.9e-9 rad a step, eight at 8.1e-11: ``benchmarks/attitude_drift.py --substeps``). The measurement log of the current episode: :meth:`measurement_log`.
 
     ## Identification
     The env is the physics and the sensors only: it imports no estimator. ``gym.make("FreeFloatingID-v0",
@@ -161,9 +161,10 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         integration_substeps: int = 1,
     ) -> None:
         self.robot = robot if isinstance(robot, Robot) else load_robot(robot)
-        if isinstance(integration_substeps, bool) or not isinstance(integration_substeps, int) or integration_substeps < 1:
+        whole = isinstance(integration_substeps, int | np.integer) and not isinstance(integration_substeps, bool)
+        if not whole or integration_substeps < 1:
             raise SpaceIdInputError(f"integration_substeps: expected an integer >= 1, got {integration_substeps!r}")
-        self.integration_substeps = integration_substeps
+        self.integration_substeps = int(integration_substeps)
         if not (np.isfinite(control_period_s) and control_period_s > 0.0):
             raise SpaceIdInputError(f"control_period_s: expected a positive number of seconds, got {control_period_s!r}")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
