@@ -17,6 +17,9 @@ refitted (profiled) at the candidate. With ``--noise-seed``: the same motion mea
     python benchmarks/diagnose_case.py none 9821 --held-noise
     python benchmarks/diagnose_case.py none 10229 --attitude exact
     python benchmarks/diagnose_case.py none 10238 --attitude exact --noise-seed 1
+    python benchmarks/diagnose_case.py initial_momentum 10834 --substeps 8
+
+``--substeps`` simulates with that many integration steps per sample (the simulator's default is one).
 """
 
 from __future__ import annotations
@@ -97,6 +100,7 @@ def main() -> None:
     parser.add_argument(
         "--noise-seed", type=int, default=None, help="the same motion measured with new noise (the env's noise_seed)"
     )
+    parser.add_argument("--substeps", type=int, default=1, help="the simulator's integration steps per sample")
     args = parser.parse_args()
     fixed = {} if args.rate is None else {"rate_hz": args.rate}
     if args.attitude is not None:
@@ -104,7 +108,9 @@ def main() -> None:
     case = draw_variation(args.effect, args.seed, fixed or None)
     redrawn = "" if args.noise_seed is None else f", noise seed {args.noise_seed}"
     print(f"{args.effect} {args.seed}: {case.robot}, {case.rate_hz} Hz, {case.attitude}, noise x{case.noise_scale:.2f}{redrawn}")
-    env = simulate_variation(case, args.seconds, noise_seed=args.noise_seed)
+    if args.substeps < 1:
+        parser.error(f"--substeps: expected an integer >= 1, got {args.substeps}")
+    env = simulate_variation(case, args.seconds, noise_seed=args.noise_seed, integration_substeps=args.substeps)
     model, log, truth = IdentificationModel(env.robot, "fuel"), env.measurement_log(), truth_of(env)
     d = diagnose(model, log)
     print(f"verdict {d.verdict}: {d.reason}")
