@@ -626,7 +626,8 @@ def independent_attitude_channel(
 GRID_STARTS = 3
 
 #: candidates per batched evaluation of a grid (:func:`best_of_grid`): measured with the pendulum's scan of 412: all
-#: at once, on a 60 s log at 50 Hz, they allocated arrays of 100 MB and cost 1.5 times as much as in batches of 64; batches of 32 cost 0.61-0.74 times what batches of 64 did
+#: at once, on a 60 s log at 50 Hz, they allocated arrays of 100 MB and cost 1.5 times as much as in batches of 64;
+#: batches of 32 cost 0.61-0.74 times what batches of 64 did
 #: (on the benchmark's log, ``benchmarks/diagnose_speed.py``), of 16 about as much as 32. The scores do not depend on
 #: the batch with one BLAS thread, as :func:`~estimators.diagnostics.diagnose.diagnose` runs (with more, the
 #: projection's product may differ in its last bit)
