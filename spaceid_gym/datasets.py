@@ -90,13 +90,15 @@ def write_episode_dataset(out_dir: str | Path, env: FreeFloatingIDEnv, extra_tru
     """Write the env's current window as a dataset folder ``out_dir``; return it as loaded back.
 
     ``truth.json`` holds the episode's true parameters (with ``hidden_effects`` when any is set),
-    the noise settings and ``extra_truth`` (e.g. the seed and the excitation used).
+    the noise settings, the simulator's ``integration_substeps`` and ``extra_truth`` (e.g. the seed and the
+    excitation used).
     """
     truth: dict[str, Any] = env.truth()
     truth.update(
         robot=env.robot.name,
         duration_s=env.measurement_log().duration_s,
         control_period_s=env.control_period_s,
+        integration_substeps=env.integration_substeps,
         noise=env.sensors.as_dict(env.control_period_s),
         **(extra_truth or {}),
     )

@@ -41,7 +41,7 @@ def test_simulate_writes_a_self_contained_dataset(tmp_path: Path) -> None:
     assert truth["fuel_consumed_kg"] == 12.0 and truth["tank_position_m"] == [0.1, -0.05, 0.08]
     assert truth["base_mass_kg"] == pytest.approx(108.0)
     assert np.array(truth["base_inertia_kgm2"]).shape == (3, 3) and len(truth["base_com_m"]) == 3
-    assert truth["seed"] == 3 and truth["noise"]["gyro_std_rad_s"] > 0
+    assert truth["seed"] == 3 and truth["noise"]["gyro_std_rad_s"] > 0 and truth["integration_substeps"] == 1
     dataset = load_dataset(out, n_joints=3)
     assert dataset.log.n_samples == 101
     assert '<robot name="quick3">' in (out / "robot.urdf").read_text()
