@@ -77,7 +77,7 @@ import numpy as np
 from scipy.stats import chi2
 from threadpoolctl import threadpool_limits
 
-from estimators.attitude_channel import AttitudeChannel
+from estimators.attitude_channel import AttitudeChannel, ErrorModel
 from estimators.attitude_propagation import PropagatedNoise
 from estimators.base import Estimator
 from estimators.diagnostics.baseline import profiled_baseline, rereferenced, scanned_baseline
@@ -556,10 +556,13 @@ def _better_of_refit(
     weights: ChannelWeights | None,
     channel: AttitudeChannel | None,
     problem: IdentificationProblem,
+    noise_start: ErrorModel | None = None,
+    each_basin: bool = True,
 ) -> ModelFit:
     """``fit`` (of ``extended``, ``problem`` its problem on ``log``) fitted again from ``starts``, each distinct minimum
-    they reach refined on both channels (``each_basin``): the better of the two by the chi-square at ``white_std``
-    (rad/s), with the time of both."""
+    they reach refined on both channels (``each_basin``), the attitude error model searched from ``noise_start`` if
+    given (:func:`~estimators.diagnostics.model_fit.fit_model`): the better of the two by the chi-square at
+    ``white_std`` (rad/s), with the time of both."""
     ext_channel = None if channel is None else AttitudeChannel.of(extended, log, channel.coupling, channel.reference)
     refit = fit_model(
         extended,
@@ -570,7 +573,8 @@ def _better_of_refit(
         channel=ext_channel,
         problem=problem,
         profile_noise=True,
-        each_basin=True,
+        each_basin=each_basin,
+        noise_start=noise_start,
     )[0]
     better = refit if _chi2(refit, white_std * white_std) < _chi2(fit, white_std * white_std) else fit
     better.wall_time_s = fit.wall_time_s + refit.wall_time_s
@@ -666,20 +670,9 @@ def _fit_candidate(
     # (a propagated model's refit keeps its start; a stationary one's searches from its defaults too); of the
     # propagated kind, as the baseline's, so that the two fits' likelihoods count the same error-model numbers
     free = extended_channel.estimate_propagated_noise(fit.theta)
-    again = fit_model(
-        extended,
-        log,
-        starts=[*starts, fit.theta],
-        effect=term.name,
-        weights=weights,
-        channel=extended_channel,
-        problem=problem,
-        profile_noise=True,
-        noise_start=free,
-    )[0]
-    better = again if joint_objective(again, weights) < joint_objective(fit, weights) else fit
-    better.wall_time_s = fit.wall_time_s + again.wall_time_s
-    return better
+    return _better_of_refit(
+        extended, log, fit, [*starts, fit.theta], weights.gyro_std_rad_s, weights, channel, problem, free, each_basin=False
+    )
 
 
 #: the p-value of a candidate's profile likelihood ratio against the baseline (both channels, its added unknowns'
