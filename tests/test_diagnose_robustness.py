@@ -582,6 +582,55 @@ def test_a_fused_attitude_too_short_for_its_coupling_leaves_the_verdict_to_the_g
     assert "too short to fit its response to the gyro" in d.reason
 
 
+def test_a_restart_that_moves_a_fit_gives_it_an_attitude_error_model_of_its_own(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A restart from global searches can carry a candidate into another basin, where the baseline's error model
+    (shaped by the missing effect at the baseline's basin) no longer describes its residual: on fresh log 11078
+    (``quick3``, 100 Hz, an exact attitude, a 0.13 N m s momentum) the restarted momentum reached the true basin with
+    the fuel 13 Cramer-Rao std off under it, and the torque containing it was named. A restarted fit that changed goes
+    through the strong-candidate step again (``_under_own_error_model``); one that did not is kept as it is. The
+    restart's refit is made to return a new object here, so that the step must be taken whatever the basins of this
+    short log (a strong momentum on 20 s of ``quick3`` with a noise-free attitude)."""
+    state = {"restart": False, "own": False}
+    moved: list[ModelFit] = []
+    checked: list[ModelFit] = []
+    real_restarted = diagnose_module._restarted
+    real_refit = diagnose_module._better_of_refit
+    real_own = diagnose_module._under_own_error_model
+
+    def restarted(*args: object, **kwargs: object) -> ModelFit:
+        state["restart"] = True
+        try:
+            return real_restarted(*args, **kwargs)  # type: ignore[arg-type]
+        finally:
+            state["restart"] = False
+
+    def refit(*args: object, **kwargs: object) -> ModelFit:
+        out = real_refit(*args, **kwargs)  # type: ignore[arg-type]
+        if not state["restart"] or state["own"]:
+            return out
+        moved.append(dataclasses.replace(out))  # the restart's refit, as a new object: a changed fit
+        return moved[-1]
+
+    def own(extended: IdentificationModel, log: MeasurementLog, fit: ModelFit, *args: object) -> ModelFit:
+        if state["restart"]:
+            checked.append(fit)
+        state["own"] = True
+        try:
+            return real_own(extended, log, fit, *args)  # type: ignore[arg-type]
+        finally:
+            state["own"] = False
+
+    monkeypatch.setattr(diagnose_module, "_restarted", restarted)
+    monkeypatch.setattr(diagnose_module, "_better_of_refit", refit)
+    monkeypatch.setattr(diagnose_module, "_under_own_error_model", own)
+    quick3 = load_robot("quick3")
+    d = diagnose(IdentificationModel(quick3, "fuel"), _log(quick3, "initial_momentum[magnitude=0.05]", "exact", duration_s=20.0))
+    assert d.verdict == "initial_momentum", d.reason
+    assert moved, "no candidate was restarted: the strong momentum is significant and must be"
+    # every restart's changed fit, and nothing else, went through the strong-candidate step
+    assert [id(f) for f in checked] == [id(f) for f in moved]
+
+
 def test_a_strong_effect_is_refitted_under_an_attitude_error_model_of_its_own(monkeypatch: pytest.MonkeyPatch) -> None:
     """A missing effect strong enough shapes the baseline's propagated error model (an exact attitude), and a
     candidate's refit keeps that model: fresh log 10839 (a 11.7 kg payload on ``orbit7``, 60 s at 50 Hz) was named a
