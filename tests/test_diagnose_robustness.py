@@ -589,10 +589,13 @@ def test_a_restart_that_moves_a_fit_gives_it_an_attitude_error_model_of_its_own(
     the fuel 13 Cramer-Rao std off under it, and the torque containing it was named. A restarted fit that changed goes
     through the strong-candidate step again (``_under_own_error_model``); one that did not is kept as it is. The
     restart's refit is made to return a new object here, so that the step must be taken whatever the basins of this
-    short log (a strong momentum on 20 s of ``quick3`` with a noise-free attitude)."""
+    short log (a strong momentum on 20 s of ``quick3`` with a noise-free attitude), and the step's result must be what
+    the restart keeps. The branch of an unchanged restart is not exercised here."""
     state = {"restart": False, "own": False}
     moved: list[ModelFit] = []
     checked: list[ModelFit] = []
+    stepped: list[ModelFit] = []
+    kept: list[ModelFit] = []
     real_restarted = diagnose_module._restarted
     real_refit = diagnose_module._better_of_refit
     real_own = diagnose_module._under_own_error_model
@@ -600,7 +603,8 @@ def test_a_restart_that_moves_a_fit_gives_it_an_attitude_error_model_of_its_own(
     def restarted(*args: object, **kwargs: object) -> ModelFit:
         state["restart"] = True
         try:
-            return real_restarted(*args, **kwargs)  # type: ignore[arg-type]
+            kept.append(real_restarted(*args, **kwargs))  # type: ignore[arg-type]
+            return kept[-1]
         finally:
             state["restart"] = False
 
@@ -612,11 +616,13 @@ def test_a_restart_that_moves_a_fit_gives_it_an_attitude_error_model_of_its_own(
         return moved[-1]
 
     def own(extended: IdentificationModel, log: MeasurementLog, fit: ModelFit, *args: object) -> ModelFit:
-        if state["restart"]:
-            checked.append(fit)
+        if not state["restart"]:
+            return real_own(extended, log, fit, *args)  # type: ignore[arg-type]
+        checked.append(fit)
         state["own"] = True
         try:
-            return real_own(extended, log, fit, *args)  # type: ignore[arg-type]
+            stepped.append(dataclasses.replace(real_own(extended, log, fit, *args)))  # type: ignore[arg-type]
+            return stepped[-1]
         finally:
             state["own"] = False
 
@@ -627,8 +633,10 @@ def test_a_restart_that_moves_a_fit_gives_it_an_attitude_error_model_of_its_own(
     d = diagnose(IdentificationModel(quick3, "fuel"), _log(quick3, "initial_momentum[magnitude=0.05]", "exact", duration_s=20.0))
     assert d.verdict == "initial_momentum", d.reason
     assert moved, "no candidate was restarted: the strong momentum is significant and must be"
-    # every restart's changed fit, and nothing else, went through the strong-candidate step
+    # every restart's changed fit, and nothing else, went through the strong-candidate step, and the restart kept what
+    # the step returned
     assert [id(f) for f in checked] == [id(f) for f in moved]
+    assert [id(f) for f in stepped] == [id(f) for f in kept]
 
 
 def test_a_strong_effect_is_refitted_under_an_attitude_error_model_of_its_own(monkeypatch: pytest.MonkeyPatch) -> None:

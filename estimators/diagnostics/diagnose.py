@@ -683,11 +683,12 @@ def _under_own_error_model(
     error model, the better of it and its refit from ``starts`` and itself with that error model searched afresh at
     it: a propagated model's refit keeps its start, the baseline's, which the missing effect shaped (a stationary one's
     searches from its defaults too). Of the propagated kind, as the baseline's, so that the two fits' likelihoods count
-    the same error-model numbers. Applied to every candidate's fit and again after a restart
+    the same error-model numbers. Applied to every candidate's fit and again after a restart that changed it
     (:func:`_restarted`), which can carry a fit into another basin: on fresh log 11078 (``quick3``, 100 Hz, an exact
     attitude, a 0.13 N m s momentum) the restarts reached the true basin, but under the baseline's error model (the
     baseline at the fuel bound) the fuel stayed 4 kg off, 13 Cramer-Rao std, and the torque containing the momentum
-    fitted better by 30.0 and was named."""
+    fitted better by 30.0 and was named. With this step there the attitude fits its error model at no candidate, and
+    the momentum is named on the gyro alone: the step did not settle the two on the attitude."""
     if channel is None or weights is None or not isinstance(weights.attitude, PropagatedNoise):
         return fit
     if not _strong(fit, baseline, weights):
@@ -702,7 +703,7 @@ def _under_own_error_model(
 
 #: the p-value of a candidate's profile likelihood ratio against the baseline (both channels, its added unknowns'
 #: degrees of freedom, taken as chi-square) below which its fit is repeated with the attitude error model searched
-#: afresh at it (:func:`_fit_candidate`). The profile ratio is not the test's (a refit can take the wander to zero);
+#: afresh at it (:func:`_under_own_error_model`). The profile ratio is not the test's (a refit can take the wander to zero);
 #: here it only picks the fits worth a second search, which on a clean log are few
 STRONG_EFFECT_P = 1e-4
 
