@@ -36,12 +36,13 @@ from typing import Any
 import numpy as np
 from scipy.stats import binomtest, chi2
 
-from estimators.diagnostics.diagnose import CANDIDATE_VARIANTS, CLEAN_LOG_FAMILIES, DEFAULT_CANDIDATES
+from estimators.diagnostics.diagnose import CANDIDATE_VARIANTS, CLEAN_LOG_FAMILIES, DEFAULT_CANDIDATES, candidate_model
 from estimators.diagnostics.residuals.correlation import ljung_box
 from estimators.diagnostics.workflow import true_parameters
 from estimators.problem import IdentificationModel
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.executors import add_executor_arguments, executor_from_arguments, job_seeds, run_jobs
+from spaceid_gym.log import MeasurementLog
 from spaceid_gym.variations import VariationCase, draw_variation, parse_fixed, simulate_variation, truth_of
 
 #: the noise scale of the noise-free copy (as benchmarks/attitude_drift.py's)
@@ -63,15 +64,15 @@ def _ratio(y: np.ndarray, columns: np.ndarray) -> float:
     return float(flat @ flat - left @ left) / variance
 
 
-def _columns(omega: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The gyro bias's (3 T, 3) and the gyro scale's (3 T, 9) columns for the predicted rates ``omega`` (T, 3)."""
-    t = len(omega)
-    bias = np.zeros((3 * t, 3))
-    scale = np.zeros((3 * t, 9))
-    for i in range(3):
-        bias[i::3, i] = 1.0
-        scale[i::3, 3 * i : 3 * i + 3] = omega
-    return bias, scale
+def _effect_columns(model: IdentificationModel, log: MeasurementLog, truth: dict[str, Any], effect: str) -> np.ndarray:
+    """The effect's columns (3 T, k_e) as the diagnosis's candidate has them: the derivative of the candidate model's
+    prediction in the effect's unknowns, at the truth with the effect off."""
+    extended = candidate_model(model, effect)
+    theta = true_parameters(extended, truth)
+    if theta is None:
+        raise RuntimeError(f"{effect}: the truth has no fuel unknowns")
+    added = extended.parameters.n_params - model.parameters.n_params
+    return extended.problem(log).jacobian(theta, count=False)[:, -added:]
 
 
 def tested(case: VariationCase, duration_s: float, noise_seed: int | None) -> dict[str, Any]:
@@ -82,20 +83,19 @@ def tested(case: VariationCase, duration_s: float, noise_seed: int | None) -> di
     env = simulate_variation(case, duration_s, noise_seed=noise_seed)
     log = env.measurement_log()
     model = IdentificationModel(env.robot, "fuel")
-    theta = true_parameters(model, truth_of(env))
+    truth = truth_of(env)
+    theta = true_parameters(model, truth)
     if theta is None:
         raise RuntimeError(f"seed {case.seed}: the truth has no fuel unknowns")
     residual = model.problem(log).residuals(theta, count=False).reshape(-1, 3)  # predicted - measured
-    predicted = log.omega_base_body_rad_s + residual
     series = (log.omega_base_body_rad_s - quiet.measurement_log().omega_base_body_rad_s, -residual)
-    bias, scale = _columns(predicted)
+    columns = {test: _effect_columns(model, log, truth, test) for test in TESTS[1:]}
     lags = min(LAGS, len(residual) // 4)
     out: dict[str, Any] = {"seed": case.seed, "draw": noise_seed, "axes": case.axes()}
     for name, y in zip(SERIES, series, strict=True):
         out[name] = {
             "whiteness": np.asarray(ljung_box(y, lags)[1], dtype=float),
-            "gyro_bias": _ratio(y, bias),
-            "gyro_scale": _ratio(y, scale),
+            **{test: _ratio(y, cols) for test, cols in columns.items()},
             "rms": float(np.sqrt(np.mean(y * y))),
         }
     return out
