@@ -16,8 +16,9 @@ systematic error (the simulator's integrator, the joints' path between samples) 
     python benchmarks/attitude_drift.py none 10713 --rates 20,50 --noise-scales 0.3,1,2.14 --momentum
     python benchmarks/attitude_drift.py none 10713 --rates 20 --noise-scales 1e-6,2.14 --momentum --substeps 8
 
-``--substeps`` simulates with that many integration steps per sample (the simulator's default is one): what is left
-is the channel's own error, the joints' path between samples.
+``--substeps`` simulates with that many integration steps per sample (default: the env's, no step longer than
+0.02 s: one at 50 and 100 Hz, three at 20 Hz; ``--substeps 1`` is the simulator before that bound); with many, what
+is left is the channel's own error, the joints' path between samples.
 
 ``--fix`` pins further axes as the matrix's ``--fix`` does (a seed of a run with pinned axes draws its motion with
 them pinned).
@@ -38,6 +39,7 @@ from estimators.problem import IdentificationModel
 from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.log import MeasurementLog
+from spaceid_gym.sim.simulator import integration_substeps_for
 from spaceid_gym.variations import AXIS_VALUES, draw_variation, parse_fixed, simulate_variation, truth_of
 
 #: the noise scale of the noise-free copy whose residual ``--momentum`` takes out
@@ -45,7 +47,7 @@ NOISE_FREE_SCALE = 1e-6
 
 
 def truth_residual(
-    effect: str, seed: int, fixed: dict[str, Any], noise_scale: float, seconds: float, substeps: int = 1
+    effect: str, seed: int, fixed: dict[str, Any], noise_scale: float, seconds: float, substeps: int | None = None
 ) -> tuple[IdentificationModel, MeasurementLog, FloatArray, FloatArray]:
     """The model, log, true unknowns and the attitude residual's steps (T-1, 3), rad, at the truth of the motion of the
     case drawn with the axes ``fixed``, measured with every noise at ``noise_scale`` times the defaults, simulated with
@@ -86,13 +88,15 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=60.0)
     parser.add_argument("--fix", default=None, help="pin further axes, e.g. 'robot=quick3'")
     parser.add_argument("--momentum", action="store_true", help="also a momentum's likelihood ratio at the truth")
-    parser.add_argument("--substeps", type=int, default=1, help="the simulator's integration steps per sample")
+    parser.add_argument(
+        "--substeps", type=int, default=None, help="the simulator's integration steps per sample (default: the env's)"
+    )
     args = parser.parse_args()
     try:
         fixed = parse_fixed(args.fix)
     except SpaceIdInputError as error:
         parser.error(str(error))
-    if args.substeps < 1:
+    if args.substeps is not None and args.substeps < 1:
         parser.error(f"--substeps: expected an integer >= 1, got {args.substeps}")
     try:
         rates = [int(r) for r in args.rates.split(",")]
@@ -116,7 +120,8 @@ def main() -> None:
                 logged, without = (momentum_ratio(model, log, theta, removed) for removed in (None, noise_free))
                 cell += f", momentum LR at the truth {logged:.1f} ({without:.1f} without the noise-free residual)"
             cells.append(cell)
-        head = f"{args.effect} {args.seed}, {rate} Hz, {args.attitude}, {args.substeps} integration step(s) a sample"
+        steps_a_sample = args.substeps or integration_substeps_for(1.0 / rate)
+        head = f"{args.effect} {args.seed}, {rate} Hz, {args.attitude}, {steps_a_sample} integration step(s) a sample"
         print(f"{head}: " + "; ".join(cells), flush=True)
 
 

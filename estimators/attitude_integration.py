@@ -17,8 +17,8 @@ step the motion is smooth, so the rule is applied step by step, never across a s
 
 Against the simulator's exact attitude on noise-free logs (tests/test_diagnose_robustness.py), the midpoint rule's
 accumulated error of 0.9-6.5e-6 rad RMS over 60 s at 20 Hz falls to 1.5-3.4e-8 rad with the correction at the true
-unknowns, and that is mostly the simulator's own integrator (one RKMK4 step per sample; with 8 sub-steps the
-correction leaves 2-37e-10 rad). The error changes with the unknowns (by a tenth over 5 kg of fuel on quick3), so the
+unknowns, and that was mostly the simulator's own integrator at one RKMK4 step per sample (with 8 sub-steps the
+correction leaves 2-37e-10 rad; the env now takes three at 20 Hz, :data:`~spaceid_gym.sim.simulator.MAX_INTEGRATION_STEP_S`). The error changes with the unknowns (by a tenth over 5 kg of fuel on quick3), so the
 channel computes it once per log at a reference (the baseline's fit in a diagnosis) with its derivative in the base's
 unknowns, and carries it to first order: from 20 kg off the reference it still leaves at most 9.5 %.
 """

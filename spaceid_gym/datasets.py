@@ -50,7 +50,7 @@ def simulate_episode(
     control_period_s: float = 0.02,
     hidden_effects: HiddenEffects | str | None = None,
     noise_seed: int | None = None,
-    integration_substeps: int = 1,
+    integration_substeps: int | None = None,
 ) -> FreeFloatingIDEnv:
     """Run one identification window in :class:`FreeFloatingIDEnv` and return the env after it.
 

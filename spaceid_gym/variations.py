@@ -304,7 +304,7 @@ def draw_variation(effect: str, seed: int, fixed: Mapping[str, Any] | None = Non
 
 
 def simulate_variation(
-    case: VariationCase, duration_s: float = 60.0, noise_seed: int | None = None, integration_substeps: int = 1
+    case: VariationCase, duration_s: float = 60.0, noise_seed: int | None = None, integration_substeps: int | None = None
 ) -> FreeFloatingIDEnv:
     """Simulate the case's log of ``duration_s`` at its rate: the env after the window (its ``measurement_log()``,
     ``truth()``, ``sensors`` and ``hidden_effects``; :func:`truth_of` for truth.json's fields). ``noise_seed``: the

@@ -13,6 +13,7 @@ import spaceid_gym  # noqa: F401  (registers the env)
 from spaceid_gym.envs import FreeFloatingIDEnv
 from spaceid_gym.information import log_det
 from spaceid_gym.mission import FuelSchedule
+from spaceid_gym.sim.simulator import MAX_INTEGRATION_STEP_S, integration_substeps_for
 
 
 def _rollout(env: gym.Env, seed: int, steps: int) -> tuple[np.ndarray, list[float]]:
@@ -168,6 +169,30 @@ def test_integration_substeps_reach_the_simulator_and_refine_the_attitude() -> N
     reference = final_attitude(32)
     one, eight = (np.linalg.norm(final_attitude(n) - reference) for n in (1, 8))
     assert one > 1000.0 * eight, (one, eight)
+
+
+def test_by_default_no_integration_step_is_longer_than_the_bound() -> None:
+    """Without ``integration_substeps`` the env cuts a control period into steps of at most
+    ``MAX_INTEGRATION_STEP_S``: one at 100 and 50 Hz, three at 20 Hz, five at 10 Hz; a number given is kept; and at
+    20 Hz the default's attitude is closer to a 32-step reference than one step's by more than 50 (fourth order: 81)."""
+    for period, expected in ((0.01, 1), (0.02, 1), (0.05, 3), (0.1, 5)):
+        assert integration_substeps_for(period) == expected
+        assert period / expected <= MAX_INTEGRATION_STEP_S + 1e-15
+        assert FreeFloatingIDEnv(robot="quick3", control_period_s=period).integration_substeps == expected
+    assert FreeFloatingIDEnv(robot="quick3", control_period_s=0.05, integration_substeps=1).integration_substeps == 1
+    with pytest.raises(ValueError, match="control_period_s"):
+        integration_substeps_for(0.0)
+
+    def final_attitude(substeps: int | None) -> np.ndarray:
+        env = FreeFloatingIDEnv(robot="quick3", control_period_s=0.05, sensors="noise_free", integration_substeps=substeps)
+        env.reset(seed=3)
+        for k in range(40):
+            env.step(np.full(env.robot.n_joints, math.sin(0.7 * k), dtype=np.float32))
+        return env.simulator.state.rot_wb.copy()
+
+    reference = final_attitude(32)
+    one, default = (np.linalg.norm(final_attitude(n) - reference) for n in (1, None))
+    assert one > 50.0 * default, (one, default)
 
 
 def test_a_noise_seed_measures_the_same_motion_with_new_noise() -> None:

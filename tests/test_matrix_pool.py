@@ -8,12 +8,13 @@ import math
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 from scipy.stats import binom
 from suite_rows import matrix_row
 
 from estimators.diagnostics import matrix
-from estimators.diagnostics.matrix import share_lower_bound, short_of_targets, summarise_matrix
+from estimators.diagnostics.matrix import fuel_z_chance, share_lower_bound, short_of_targets, summarise_matrix
 from estimators.diagnostics.matrix_pool import pool_matrix_runs, read_matrix_run
 from spaceid_gym.cli import main
 from spaceid_gym.errors import SpaceIdInputError
@@ -127,10 +128,25 @@ def test_the_lower_bound_is_the_share_at_which_so_many_right_verdicts_have_proba
         share_lower_bound(6, 5)
 
 
+def test_the_chance_of_a_fuel_z_rms_is_a_chi_square_tail_with_the_unknowns_independent_or_moving_as_one() -> None:
+    """Monte Carlo of standard normal z: four unknowns per log over five logs, independent and identical within a
+    log; the share of draws whose RMS reaches 1.5 matches each tail (binomial std of 20,000 draws about 0.001)."""
+    rng = np.random.default_rng(20261129)
+    independent_z = rng.standard_normal((20_000, 5, 4))
+    as_one_z = np.repeat(rng.standard_normal((20_000, 5, 1)), 4, axis=2)
+    independent, as_one = fuel_z_chance(1.5, 20, 5)
+    for z, chance in ((independent_z, independent), (as_one_z, as_one)):
+        share = np.mean(np.sqrt(np.mean(z**2, axis=(1, 2))) >= 1.5)
+        assert share == pytest.approx(chance, abs=4.0 * np.sqrt(chance * (1.0 - chance) / 20_000) + 1e-4)
+    assert independent < 0.01 < as_one  # correlation within a log makes a high RMS far likelier
+    assert all(math.isnan(c) for c in fuel_z_chance(1.6, 0, 0))
+
+
 def test_cells_short_of_a_target_are_listed_with_what_they_miss() -> None:
     def cell(effect: str, axis: str, correct: int, eligible: int, residual: float = 1.05, z: float = 1.0) -> dict[str, Any]:
         where = {"effect": effect, "axis": axis, "value": "all" if axis == "all" else "20", "logs": eligible + 1}
-        return where | {"eligible": eligible, "correct": correct, "rms_over_noise_after_max": residual, "fuel_z_rms_after": z}
+        measured = {"rms_over_noise_after_max": residual, "fuel_z_rms_after": z, "fuel_z_values_after": 4 * correct}
+        return where | {"eligible": eligible, "correct": correct} | measured
 
     summary = [
         cell("none", "all", 19, 20),  # 95 %: meets the clean target
@@ -143,5 +159,7 @@ def test_cells_short_of_a_target_are_listed_with_what_they_miss() -> None:
     assert len(short) == 3
     assert short[0].startswith("none, rate_hz 20 (21 logs, 20 eligible): named right 18/20 (target 95 %;")
     assert f"{binom.cdf(18, 20, 0.95):.2g} at the target share" in short[0]
-    assert short[1] == "delay, every log (11 logs, 10 eligible): fuel z RMS 1.60 (target 1.5)"
+    assert short[1].startswith("delay, every log (11 logs, 10 eligible): fuel z RMS 1.60 (target 1.5; as large has")
+    independent, as_one = fuel_z_chance(1.6, 36, 9)
+    assert f"probability {independent:.2g} at a calibrated bound with the unknowns independent, {as_one:.2g} with" in short[1]
     assert "residual after naming up to 1.150 x noise (target 1.1)" in short[2]

@@ -16,12 +16,13 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.stats import beta, binom
+from scipy.stats import beta, binom, chi2
 
 from estimators.diagnostics.diagnose import NO_MISSING_EFFECT
 from estimators.diagnostics.power import expected_power, separation
 from estimators.diagnostics.suite import ERROR_VERDICT, SUITE_EFFECTS, diagnosed_cells, error_cells, write_run
 from estimators.problem import IdentificationModel
+from spaceid_gym.arrays import FloatArray
 from spaceid_gym.executors import ExecutorSpec, run_jobs
 from spaceid_gym.variations import (
     AXES,
@@ -172,6 +173,7 @@ def _matrix_cell(effect: str, axis: str, value: str, rows: list[dict[str, Any]])
         "rms_over_noise_after_mean": float(np.mean([r["rms_over_noise_after"] for r in correct])) if correct else math.nan,
         "rms_over_noise_after_max": float(np.max([r["rms_over_noise_after"] for r in correct])) if correct else math.nan,
         "fuel_z_rms_after": _fuel_z_rms(correct),
+        "fuel_z_values_after": int(np.isfinite(_fuel_z(correct)).sum()),
         "wall_time_s_mean": float(np.mean([r["wall_time_s"] for r in ran])) if ran else math.nan,
     }
 
@@ -208,18 +210,47 @@ def short_of_targets(summary: list[dict[str, Any]]) -> list[str]:
         if s["rms_over_noise_after_max"] > TARGET_RESIDUAL:
             misses.append(f"residual after naming up to {s['rms_over_noise_after_max']:.3f} x noise (target {TARGET_RESIDUAL:g})")
         if s["fuel_z_rms_after"] > TARGET_FUEL_Z:
-            misses.append(f"fuel z RMS {s['fuel_z_rms_after']:.2f} (target {TARGET_FUEL_Z:g})")
+            misses.append(_fuel_z_miss(s["fuel_z_rms_after"], s.get("fuel_z_values_after", 0), s["correct"]))
         if misses:
             where = "every log" if s["axis"] == "all" else f"{s['axis']} {s['value']}"
             lines.append(f"{s['effect']}, {where} ({s['logs']} logs, {s['eligible']} eligible): {'; '.join(misses)}")
     return lines
 
 
+def fuel_z_chance(z_rms: float, values: int, logs: int) -> tuple[float, float]:
+    """The probability of a fuel z RMS at least ``z_rms`` over ``values`` finite z of ``logs`` logs if every z were a
+    standard normal (the Cramér-Rao bound calibrated and the estimate unbiased), two ways: the z independent (the sum
+    of squares a chi-square with ``values`` degrees of freedom), and a log's unknowns moving as one (each log's share
+    ``values / logs`` times one chi-square degree: the sum ``values / logs`` times a chi-square with ``logs``). A
+    log's fuel unknowns are correlated, its z between the two. ``(nan, nan)`` without values."""
+    if values <= 0 or logs <= 0:
+        return math.nan, math.nan
+    squares = z_rms * z_rms * values
+    return float(chi2.sf(squares, values)), float(chi2.sf(squares * logs / values, logs))
+
+
+def _fuel_z_miss(z_rms: float, values: int, logs: int) -> str:
+    """A cell's fuel z RMS above :data:`TARGET_FUEL_Z`, with the chance of as large at a calibrated bound
+    (:func:`fuel_z_chance`; without it where the summary does not count the values)."""
+    if not values:
+        return f"fuel z RMS {z_rms:.2f} (target {TARGET_FUEL_Z:g})"
+    independent, as_one = fuel_z_chance(z_rms, values, logs)
+    return (
+        f"fuel z RMS {z_rms:.2f} (target {TARGET_FUEL_Z:g}; as large has probability {independent:.2g} at a "
+        f"calibrated bound with the unknowns independent, {as_one:.2g} with a log's moving as one)"
+    )
+
+
+def _fuel_z(rows: list[dict[str, Any]]) -> FloatArray:
+    """The error after the verdict over its Cramér-Rao std (``z_*_after``) of the four fuel unknowns, a row per log."""
+    return np.array([[r[f"z_{name}_after"] for name in ("mdf", "bx", "by", "bz")] for r in rows], dtype=float)
+
+
 def _fuel_z_rms(rows: list[dict[str, Any]]) -> float:
     """The RMS over ``rows`` and the four fuel unknowns of the error after the verdict over its Cramér-Rao std
     (``z_*_after``; 1 for an efficient, unbiased estimate), the unknowns without a finite bound left out (their z is
     NaN: :attr:`~estimators.diagnostics.workflow.ParameterErrors.z`); NaN without rows."""
-    z = np.array([[r[f"z_{name}_after"] for name in ("mdf", "bx", "by", "bz")] for r in rows], dtype=float)
+    z = _fuel_z(rows)
     return float(np.sqrt(np.nanmean(z**2))) if z.size and np.isfinite(z).any() else math.nan
 
 

@@ -26,7 +26,7 @@ from spaceid_gym.physics.momentum import base_parameter_directions, twist_parame
 from spaceid_gym.robots import Robot, load_robot
 from spaceid_gym.sim.recorder import LogRecorder
 from spaceid_gym.sim.sensors import Measurement, SensorModel
-from spaceid_gym.sim.simulator import FreeFloatingSimulator
+from spaceid_gym.sim.simulator import FreeFloatingSimulator, integration_substeps_for
 from spaceid_gym.sim.state import FreeFloatingState
 
 #: the default identification window: 3000 steps, 60 s at 50 Hz (the registered ``max_episode_steps``)
@@ -133,10 +133,12 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     ``"noise_free"``), ``fuel_schedule`` (:class:`~spaceid_gym.mission.FuelSchedule`),
     ``tank_position_m`` (fixed tank, default drawn per satellite), ``reward_weights``
     (:class:`RewardWeights`), ``render_mode`` (``"rgb_array"`` or ``None``), ``hidden_effects`` (see
-    *Hidden effects*; default none), ``integration_substeps`` (1: RKMK4 steps of the base's attitude, and of a
+    *Hidden effects*; default none), ``integration_substeps`` (RKMK4 steps of the base's attitude, and of a
     slosh, per smooth piece of a control period, the pieces between the servo's switch times; the joints' motion is
-    exact. On clean matrix log 10713's motion, ``quick3`` at 20 Hz noise-free, one step leaves the attitude channel's
-    residual at the truth at 1.9e-9 rad a step, eight at 8.1e-11: ``benchmarks/attitude_drift.py --substeps``). The measurement log of the current episode: :meth:`measurement_log`.
+    exact. Default ``None``: no step longer than
+    :data:`~spaceid_gym.sim.simulator.MAX_INTEGRATION_STEP_S`, so one at 50 and 100 Hz and three at 20 Hz. With one
+    step at 20 Hz the noise-free attitude of clean matrix log 10713's motion (``quick3``) leaves the attitude channel's
+    residual at the truth at 1.9e-9 rad a step, with eight at 8.1e-11: ``benchmarks/attitude_drift.py --substeps``). The measurement log of the current episode: :meth:`measurement_log`.
 
     ## Identification
     The env is the physics and the sensors only: it imports no estimator. ``gym.make("FreeFloatingID-v0",
@@ -158,12 +160,14 @@ class FreeFloatingIDEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         reward_weights: RewardWeights | None = None,
         render_mode: str | None = None,
         hidden_effects: HiddenEffects | str | None = None,
-        integration_substeps: int = 1,
+        integration_substeps: int | None = None,
     ) -> None:
         self.robot = robot if isinstance(robot, Robot) else load_robot(robot)
+        if integration_substeps is None:
+            integration_substeps = integration_substeps_for(control_period_s)  # validates the period
         whole = isinstance(integration_substeps, int | np.integer) and not isinstance(integration_substeps, bool)
         if not whole or integration_substeps < 1:
-            raise SpaceIdInputError(f"integration_substeps: expected an integer >= 1, got {integration_substeps!r}")
+            raise SpaceIdInputError(f"integration_substeps: expected an integer >= 1 or None, got {integration_substeps!r}")
         self.integration_substeps = int(integration_substeps)
         if not (np.isfinite(control_period_s) and control_period_s > 0.0):
             raise SpaceIdInputError(f"control_period_s: expected a positive number of seconds, got {control_period_s!r}")

@@ -71,6 +71,20 @@ from spaceid_gym.sim.slosh import (
 )
 from spaceid_gym.sim.state import FreeFloatingState
 
+#: the longest step the env lets the attitude integrator take (s): a control period longer than this is cut into
+#: :func:`integration_substeps_for` steps. At 0.02 s the RKMK4 attitude's global error is about 1e-9 rad over 10 s of
+#: full-rate motion (``benchmarks/physics_checks.py``: 4.7e-8 at 0.05 s, fourth order); at one 0.05 s step per sample a
+#: noise-free attitude carried an error the diagnosis took for a payload (clean 11240, ``quick3`` at 20 Hz)
+MAX_INTEGRATION_STEP_S = 0.02
+
+
+def integration_substeps_for(control_period_s: float) -> int:
+    """The simulator's steps per control period of ``control_period_s`` so that none is longer than
+    :data:`MAX_INTEGRATION_STEP_S`: 1 at 50 and 100 Hz, 3 at 20 Hz."""
+    if not (np.isfinite(control_period_s) and control_period_s > 0.0):
+        raise SpaceIdInputError(f"control_period_s: expected a positive number of seconds, got {control_period_s!r}")
+    return max(1, int(np.ceil(control_period_s / MAX_INTEGRATION_STEP_S - 1e-9)))
+
 
 class FreeFloatingSimulator:
     """Integrates a free-floating robot whose joints follow commanded rates.
