@@ -146,6 +146,7 @@ def test_cells_short_of_a_target_are_listed_with_what_they_miss() -> None:
     def cell(effect: str, axis: str, correct: int, eligible: int, residual: float = 1.05, z: float = 1.0) -> dict[str, Any]:
         where = {"effect": effect, "axis": axis, "value": "all" if axis == "all" else "20", "logs": eligible + 1}
         measured = {"rms_over_noise_after_max": residual, "fuel_z_rms_after": z, "fuel_z_values_after": 4 * correct}
+        measured["fuel_z_logs_after"] = correct
         return where | {"eligible": eligible, "correct": correct} | measured
 
     summary = [

@@ -240,6 +240,7 @@ def test_the_matrix_counts_eligible_logs_writes_every_row_and_fails_on_an_error(
     # seeds 0 and 2 are eligible (power 0.95); seed 2's verdict is wrong
     assert (overall["logs"], overall["eligible"], overall["correct"]) == (4, 2, 1)
     assert overall["fuel_z_rms_after"] == pytest.approx(1.0)
+    assert (overall["fuel_z_values_after"], overall["fuel_z_logs_after"]) == (4, 1)  # the right verdict's four z
     assert "| gyro_bias | 4 | 2 | 1/2 (50 %)" in (tmp_path / "matrix.md").read_text()
 
 
