@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from scipy import stats
 
 from estimators.attitude_channel import AttitudeChannel
 from estimators.attitude_noise import AttitudeNoise
@@ -28,7 +29,7 @@ from estimators.diagnostics.diagnose import (
 from estimators.diagnostics.matrix import _fuel_z_rms
 from estimators.diagnostics.model_fit import _scored
 from estimators.diagnostics.suite import DIAGNOSTIC_EXCITATION
-from estimators.diagnostics.verdict import _prefer_encompassing, _score, rivals
+from estimators.diagnostics.verdict import _prefer_encompassing, _score, held_nesting_p_value, held_nesting_ratio, rivals
 from estimators.diagnostics.workflow import (
     ParameterErrors,
     bound_model,
@@ -184,6 +185,33 @@ def test_nesting_test_is_corrected_for_the_containers_compared_only(nested_stati
     verdict, reason = _verdict(baseline, [momentum, torque, bias], analysis=None, alpha=0.01)  # type: ignore[arg-type]
     assert verdict == expected, reason
     assert ("contains initial_momentum" in reason) == (expected == "external_torque")
+
+
+@pytest.mark.parametrize(("torque_attitude_held", "expected"), [(1002.1, "initial_momentum"), (988.0, "external_torque")])
+def test_the_nesting_test_holds_the_attitude_error_model(torque_attitude_held: float, expected: str) -> None:
+    """Held-out momentum log 11181 (``orbit7``, 20 Hz, 1" tracker): the constant torque containing the momentum (3
+    unknowns more) fitted 18.3 better in profile chi-square, 14.8 of it in the attitude channel with each fit's error
+    model refitted; with the baseline's held, 3.4 in all (the attitude's share -0.1). The torque was named at
+    p 0.00038. The nesting test now takes the held ratio, capped at the profile's: a container that gains only by
+    refitting the error model keeps the nested effect; one that gains under the held model too (here 17.5, p 0.00056)
+    is named. Without attitude the two ratios are one; a fit with attitude against one without is an error."""
+    baseline = _scored_fit(None, 4, 12000.0)
+    momentum = _scored_fit("initial_momentum", 7, 9240.0)
+    torque = _scored_fit("external_torque", 10, 9240.0 - 18.3)
+    momentum.attitude_chi2, momentum.attitude_chi2_held = 1000.0, 1002.0  # held and profile differ: both are read
+    torque.attitude_chi2, torque.attitude_chi2_held = 1000.0 - 14.8, torque_attitude_held
+    held_gain = 3.5 + (1002.0 - torque_attitude_held)  # the gyro's 3.5 and the attitude's under the held model
+    assert held_nesting_ratio(momentum, torque) == pytest.approx(min(held_gain, 18.3))
+    assert held_nesting_p_value(momentum, torque) == pytest.approx(stats.chi2.sf(held_gain, 3))
+    assert nested_p_value(momentum, torque) == pytest.approx(stats.chi2.sf(18.3, 3))  # the profile's, for encompassing
+    verdict, reason = _verdict(baseline, [momentum, torque], analysis=None, alpha=0.01)  # type: ignore[arg-type]
+    assert verdict == expected, reason
+    assert ("contains initial_momentum" in reason) == (expected == "external_torque")
+    torque.attitude_chi2_held = 1002.0 - 100.0  # a held gain above the profile's is capped at it
+    assert held_nesting_ratio(momentum, torque) == pytest.approx(18.3)
+    torque.attitude_chi2_held = None
+    with pytest.raises(ValueError, match="both have an attitude channel or neither"):
+        held_nesting_ratio(momentum, torque)
 
 
 @pytest.mark.parametrize(("bias_margin", "rival"), [(2.3, True), (4.0, True), (4.5, False)])
