@@ -235,8 +235,8 @@ def held_nesting_ratio(inner: ModelFit, outer: ModelFit) -> float:
     whose motion with eight other noise draws is named the momentum every time (``benchmarks/noise_draws.py``).
 
     The baseline's error model is the screening test's null estimate (:func:`held_likelihood_ratio`), not the
-    nested fit's: neither fit is at its optimum under it, so the ratio is a conservative heuristic rather than a
-    score test (holding the nested fit's own error model would be that; not done). Where a strong missing effect
+    nested fit's: neither fit is at its optimum under it, so the ratio is a heuristic, never above the profile
+    ratio, rather than a score test (holding the nested fit's own error model would be that; not done). Where a strong missing effect
     widened the baseline's error model, the attitude's share shrinks and the test rests on the gyro: its power on
     torque logs is measured on fresh seeds (docs/results.md, Variation matrix)."""
     if (inner.attitude_chi2_held is None) != (outer.attitude_chi2_held is None):
