@@ -158,6 +158,7 @@ def _matrix_cell(effect: str, axis: str, value: str, rows: list[dict[str, Any]])
     correct = [r for r in eligible if r["correct"]]
     separable = [r for r in eligible if _separable(r)]
     ran = [r for r in rows if r["verdict"] != ERROR_VERDICT]
+    finite_z = np.isfinite(_fuel_z(correct))
     return {
         "effect": effect,
         "axis": axis,
@@ -173,8 +174,8 @@ def _matrix_cell(effect: str, axis: str, value: str, rows: list[dict[str, Any]])
         "rms_over_noise_after_mean": float(np.mean([r["rms_over_noise_after"] for r in correct])) if correct else math.nan,
         "rms_over_noise_after_max": float(np.max([r["rms_over_noise_after"] for r in correct])) if correct else math.nan,
         "fuel_z_rms_after": _fuel_z_rms(correct),
-        "fuel_z_values_after": int(np.isfinite(_fuel_z(correct)).sum()),
-        "fuel_z_logs_after": int(np.isfinite(_fuel_z(correct)).any(axis=1).sum()) if correct else 0,
+        "fuel_z_values_after": int(finite_z.sum()),
+        "fuel_z_logs_after": int(finite_z.any(axis=1).sum()),
         "wall_time_s_mean": float(np.mean([r["wall_time_s"] for r in ran])) if ran else math.nan,
     }
 
@@ -211,7 +212,7 @@ def short_of_targets(summary: list[dict[str, Any]]) -> list[str]:
         if s["rms_over_noise_after_max"] > TARGET_RESIDUAL:
             misses.append(f"residual after naming up to {s['rms_over_noise_after_max']:.3f} x noise (target {TARGET_RESIDUAL:g})")
         if s["fuel_z_rms_after"] > TARGET_FUEL_Z:
-            misses.append(_fuel_z_miss(s["fuel_z_rms_after"], s.get("fuel_z_values_after", 0), s.get("fuel_z_logs_after", 0)))
+            misses.append(_fuel_z_miss(s["fuel_z_rms_after"], s["fuel_z_values_after"], s["fuel_z_logs_after"]))
         if misses:
             where = "every log" if s["axis"] == "all" else f"{s['axis']} {s['value']}"
             lines.append(f"{s['effect']}, {where} ({s['logs']} logs, {s['eligible']} eligible): {'; '.join(misses)}")
@@ -234,9 +235,7 @@ def fuel_z_chance(z_rms: float, values: int, logs: int) -> tuple[float, float]:
 
 def _fuel_z_miss(z_rms: float, values: int, logs: int) -> str:
     """A cell's fuel z RMS above :data:`TARGET_FUEL_Z`, with the chance of as large at a calibrated bound
-    (:func:`fuel_z_chance`; without it where the summary does not count the values)."""
-    if not values:
-        return f"fuel z RMS {z_rms:.2f} (target {TARGET_FUEL_Z:g})"
+    (:func:`fuel_z_chance`)."""
     independent, as_one = fuel_z_chance(z_rms, values, logs)
     return (
         f"fuel z RMS {z_rms:.2f} (target {TARGET_FUEL_Z:g}; as large has probability {independent:.2g} at a "
@@ -246,7 +245,7 @@ def _fuel_z_miss(z_rms: float, values: int, logs: int) -> str:
 
 def _fuel_z(rows: list[dict[str, Any]]) -> FloatArray:
     """The error after the verdict over its Cramér-Rao std (``z_*_after``) of the four fuel unknowns, a row per log."""
-    return np.array([[r[f"z_{name}_after"] for name in ("mdf", "bx", "by", "bz")] for r in rows], dtype=float)
+    return np.array([[r[f"z_{name}_after"] for name in ("mdf", "bx", "by", "bz")] for r in rows], dtype=float).reshape(-1, 4)
 
 
 def _fuel_z_rms(rows: list[dict[str, Any]]) -> float:
