@@ -26,22 +26,24 @@ one at 50 and 100 Hz, three at 20 Hz; ``--substeps 1`` is the simulator before t
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
 import numpy as np
 from scipy.optimize import minimize_scalar
 
 from estimators.attitude_channel import AttitudeChannel
 from estimators.diagnostics.diagnose import Diagnosis, candidate_model, diagnose, fit_model
+from estimators.diagnostics.model_fit import gyro_log
 from estimators.diagnostics.workflow import ParameterErrors, apply_effect, baseline_estimate, parameter_errors, true_parameters
 from estimators.problem import IdentificationModel
 from spaceid_gym.log import MeasurementLog
 from spaceid_gym.variations import draw_variation, simulate_variation, truth_of
 
 
-def delay_at_truth(seed: int, rate_hz: int | None, duration_s: float) -> str:
-    """The best delay (others at the truth) and the residual RMS at the true delay over the gyro's noise."""
-    fixed = None if rate_hz is None else {"rate_hz": rate_hz}
-    case = draw_variation("delay", seed, fixed)
+def delay_at_truth(seed: int, fixed: dict[str, Any], duration_s: float) -> str:
+    """The best delay (others at the truth) and the residual RMS at the true delay over the gyro's noise, of the case
+    drawn with the axes ``fixed``."""
+    case = draw_variation("delay", seed, fixed or None)
     env = simulate_variation(case, duration_s)
     extended = candidate_model(IdentificationModel(env.robot, "fuel"), "delay")
     theta = true_parameters(extended, truth_of(env))
@@ -72,7 +74,8 @@ def held_noise_gains(model: IdentificationModel, log: MeasurementLog, d: Diagnos
     for c in sorted(d.candidates, key=lambda f: -f.lr_statistic):
         extended = candidate_model(model, c.spec)
         channel = AttitudeChannel.of(extended, log, weights.coupling, weights.reference)
-        held = fit_model(extended, log, starts=[c.theta], effect=c.effect, weights=weights, channel=channel)[0]
+        problem = extended.problem(gyro_log(log, c))  # the reading the fit was made with
+        held = fit_model(extended, log, starts=[c.theta], effect=c.effect, weights=weights, channel=channel, problem=problem)[0]
         assert channel is not None
         profiled = (d.baseline.attitude_chi2 or 0.0) - (c.attitude_chi2 or 0.0)
         lines.append(
@@ -122,6 +125,8 @@ def main() -> None:
         gyro = (b.rss - c.rss) / sigma2
         attitude = (b.attitude_chi2 or 0.0) - (c.attitude_chi2 or 0.0)
         why = "; ".join(c.implausible)
+        if c.gyro_correction_rad_s is not None:  # its gyro gain is against the reading less the correction
+            why = "; ".join(filter(None, (why, "gyro gain of the refit with the reading between samples held")))
         print(
             f"  {c.effect:17s} LR {c.lr_statistic:9.1f}  gyro {gyro:9.1f}  attitude {attitude:8.1f}  "
             f"held {c.held_lr_statistic:9.1f} (p {c.p_value:.2g})  {why}"
@@ -136,7 +141,7 @@ def main() -> None:
         print("\n".join(held_noise_gains(model, log, d)))
     if args.delay_at_truth:
         for rate in (None, 50, 100):
-            print(delay_at_truth(args.seed, rate, args.seconds))
+            print(delay_at_truth(args.seed, fixed if rate is None else {**fixed, "rate_hz": rate}, args.seconds))
 
 
 if __name__ == "__main__":

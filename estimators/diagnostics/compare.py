@@ -85,8 +85,11 @@ def compare(
     theta: FloatArray,
     noise_std_rad_s: float | None = None,
     label: str | None = None,
+    gyro_correction_rad_s: FloatArray | None = None,
 ) -> Comparison:
-    """Evaluate ``model`` at ``theta`` (k,) over ``log`` and analyse the residual."""
+    """Evaluate ``model`` at ``theta`` (k,) over ``log`` and analyse the residual. ``gyro_correction_rad_s`` (T, 3) is
+    added to the prediction: what a fit held beyond it (a delayed gyro's reading between samples,
+    :attr:`~estimators.diagnostics.model_fit.ModelFit.gyro_correction_rad_s`)."""
     problem = model.problem(log)
     theta = np.asarray(theta, dtype=float)
     if theta.shape != (problem.n_params,):
@@ -94,6 +97,11 @@ def compare(
             f"theta: expected {problem.n_params} values ({', '.join(problem.parameters.names)}), got {theta.size}"
         )
     predicted = problem.predict(theta[None], count=False)[0]
+    if gyro_correction_rad_s is not None:
+        correction = np.asarray(gyro_correction_rad_s, dtype=float)
+        if correction.shape != predicted.shape:
+            raise SpaceIdInputError(f"gyro_correction_rad_s: expected shape {predicted.shape}, got {correction.shape}")
+        predicted = predicted + correction
     measured = np.asarray(log.omega_base_body_rad_s, dtype=float)
     analysis = analyse_residuals(log.t_s, measured, predicted, log.q_rad, log.dq_rad_s, noise_std=noise_std_rad_s)
     return Comparison(

@@ -19,7 +19,7 @@ from estimators.attitude_channel import AttitudeChannel, GyroCoupling, noise_fro
 from estimators.base import Estimator
 from estimators.diagnostics.compare import Comparison, compare
 from estimators.diagnostics.diagnose import Diagnosis, candidate_model, diagnose, simulated_variant
-from estimators.diagnostics.model_fit import ChannelWeights, ModelFit, profile_filter_gain
+from estimators.diagnostics.model_fit import ChannelWeights, ModelFit, gyro_log, profile_filter_gain
 from estimators.diagnostics.plots import plot_before_after, plot_correlations, plot_overlay, plot_ranking, plot_residuals
 from estimators.diagnostics.report import HtmlReport
 from estimators.estimate import Estimate
@@ -74,8 +74,10 @@ def fit_estimate(
     model: IdentificationModel, log: MeasurementLog, fit: ModelFit, weights: ChannelWeights | None, origin: str
 ) -> Estimate:
     """The estimate of ``model``'s ``fit`` on ``log`` (a fit of :func:`~estimators.diagnostics.diagnose.diagnose`),
-    with the bound of both channels under ``weights`` (``None``: the gyro's alone); ``origin`` says which fit."""
-    problem = model.problem(log)
+    with the bound of both channels under ``weights`` (``None``: the gyro's alone); ``origin`` says which fit. The
+    gyro's noise and residual are against the reading the fit was made with (less its
+    :attr:`~estimators.diagnostics.model_fit.ModelFit.gyro_correction_rad_s`, :func:`~estimators.diagnostics.model_fit.gyro_log`)."""
+    problem = model.problem(gyro_log(log, fit))
     options: dict[str, Any] = {"from": origin}
     extra_information = None
     channel = None if weights is None else AttitudeChannel.of(model, log, weights.coupling, weights.reference)
@@ -306,7 +308,9 @@ def run_loop(
     extended = model
     if effect is not None:
         extended, estimate_after = apply_effect(model, log, effect, diagnosis)
-        after = compare(extended, log, estimate_after.theta, floor, label=extended.parameters.name)
+        fitted = diagnosis.fit_of(effect)
+        correction = None if fitted is None else fitted.gyro_correction_rad_s
+        after = compare(extended, log, estimate_after.theta, floor, extended.parameters.name, correction)
     errors = (None, None)
     if truth is not None:
         errors = (

@@ -221,6 +221,10 @@ class Delay(EffectTerm):
     sample (its bin keeps only the real part, ``cos(pi lag)``), so the delay smoothed the noise near it and a fit
     found sub-millisecond delays on clean logs (paper6 at 100 Hz, no attitude: mean likelihood ratio 3.8 over 12 clean
     logs, 1 expected; 0.73 with the band). The signal of the base rate (excitation and effects) lies far below it.
+
+    The ramp is exact for a band-limited rate; at 20 Hz the joint servos change the rate within a step, and a named
+    delay's fit is made again with the reading between samples from the joints' samples held at it
+    (:mod:`estimators.gyro_between_samples`).
     """
 
     name = "delay"
