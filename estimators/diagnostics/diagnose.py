@@ -31,10 +31,14 @@ For a model (robot, parameterisation, effects already in it) and a log, :func:`d
 4. gives a verdict: the candidate with the lowest BIC among the significant and plausible ones, the *leader*,
    replaced
 
+   * by the lowest BIC of the others when it contains another candidate as a special case and is not
+     significantly better than that one by their likelihood-ratio test (the attitude's error model held at the
+     baseline's, ``held_nesting_ratio``), at ``alpha`` divided by the number of such candidates compared
+     (:func:`_no_better_containers`);
    * by a candidate that contains it as a special case (e.g. ``external_torque`` for ``initial_momentum``)
-     when that one is significantly better by its own likelihood-ratio test (the attitude's error model held at
-     the baseline's, ``held_nesting_ratio``), at ``alpha`` divided by the number of such containers compared
-     (:func:`_prefer_nesting`);
+     when that one is significantly better by the same test, at ``alpha`` divided by the number of such
+     containers compared (:func:`_prefer_nesting`): a container is named only when it fits significantly better
+     than what it contains, whichever has the lower BIC;
    * else by a candidate that *encompasses* it (:func:`_prefer_encompassing`): a significant and plausible
      candidate that fits better than the leader but pays more unknowns in the BIC is fitted together with the
      leader; if adding it to the leader lowers the chi-square significantly and adding the leader to it does
@@ -331,7 +335,7 @@ def _refine_named_delay(model: IdentificationModel, log: MeasurementLog, diagnos
     named = diagnosis.best
     assert named is not None
     refined, moved_s = refine_between_samples(candidate_model(model, named.spec), log, named, diagnosis.weights)
-    diagnosis.candidates[diagnosis.candidates.index(named)] = refined
+    diagnosis.candidates = [refined if c is named else c for c in diagnosis.candidates]
     index = named.names.index(DELAY_NAME)
     unsettled = "" if moved_s < BETWEEN_SAMPLES_TOLERANCE_S else f", not settled: {1e3 * moved_s:.3f} ms in the last round"
     diagnosis.reason += (
