@@ -31,14 +31,10 @@ For a model (robot, parameterisation, effects already in it) and a log, :func:`d
 4. gives a verdict: the candidate with the lowest BIC among the significant and plausible ones, the *leader*,
    replaced
 
-   * by the lowest BIC of the others when it contains another candidate as a special case and is not
-     significantly better than that one by their likelihood-ratio test (the attitude's error model held at the
-     baseline's, ``held_nesting_ratio``), at ``alpha`` divided by the number of such candidates compared
-     (:func:`_no_better_containers`);
    * by a candidate that contains it as a special case (e.g. ``external_torque`` for ``initial_momentum``)
-     when that one is significantly better by the same test, at ``alpha`` divided by the number of such
-     containers compared (:func:`_prefer_nesting`): a container is named only when it fits significantly better
-     than what it contains, whichever has the lower BIC;
+     when that one is significantly better by its own likelihood-ratio test (the attitude's error model held at
+     the baseline's, ``held_nesting_ratio``), at ``alpha`` divided by the number of such containers compared
+     (:func:`_prefer_nesting`);
    * else by a candidate that *encompasses* it (:func:`_prefer_encompassing`): a significant and plausible
      candidate that fits better than the leader but pays more unknowns in the BIC is fitted together with the
      leader; if adding it to the leader lowers the chi-square significantly and adding the leader to it does

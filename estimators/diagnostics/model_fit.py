@@ -211,9 +211,12 @@ class ModelFit(CandidateScores):
 def gyro_log(log: MeasurementLog, fit: ModelFit) -> MeasurementLog:
     """``log`` with ``fit``'s correction taken off its gyro reading (:attr:`ModelFit.gyro_correction_rad_s`; ``log``
     itself without one): the log its gyro residual is against."""
-    if fit.gyro_correction_rad_s is None:
-        return log
-    return replace(log, omega_base_body_rad_s=np.asarray(log.omega_base_body_rad_s, dtype=float) - fit.gyro_correction_rad_s)
+    return log if fit.gyro_correction_rad_s is None else _gyro_less(log, fit.gyro_correction_rad_s)
+
+
+def _gyro_less(log: MeasurementLog, correction_rad_s: FloatArray) -> MeasurementLog:
+    """``log`` with ``correction_rad_s`` (T, 3) taken off its gyro reading."""
+    return replace(log, omega_base_body_rad_s=np.asarray(log.omega_base_body_rad_s, dtype=float) - correction_rad_s)
 
 
 #: the rounds of :func:`refine_between_samples` at most, and the change of the delay (s) at which it stops
@@ -245,7 +248,6 @@ def refine_between_samples(
     current, spent = fit, 0.0
     for _ in range(BETWEEN_SAMPLES_ROUNDS):
         correction = between_samples_correction(model, log, current.theta)
-        corrected = replace(log, omega_base_body_rad_s=np.asarray(log.omega_base_body_rad_s, dtype=float) - correction)
         refit = fit_model(
             model,
             log,
@@ -253,7 +255,7 @@ def refine_between_samples(
             effect=fit.effect,
             weights=weights,
             channel=channel,
-            problem=model.problem(corrected),
+            problem=model.problem(_gyro_less(log, correction)),
             profile_noise=weights is not None,
         )[0]
         refit.gyro_correction_rad_s = correction

@@ -99,20 +99,12 @@ def _verdict(
                     f"p = {best.attitude_p_value:.2g} against its count)"
                 )
             ]
-            if leader is not lowest and best is leader and lowest.effect in EFFECT_TERMS[str(leader.effect)].nests:
+            if leader is not lowest and best is leader:
                 why.append(
                     f"it contains {lowest.effect} (lower BIC) and fits significantly better (likelihood ratio "
                     f"{held_nesting_ratio(lowest, leader):.1f} with the attitude error model held, "
                     f"p = {held_nesting_p_value(lowest, leader):.2g})"
                 )
-            for container, inner in _no_better_containers(named, alpha):
-                if best is leader and container.bic < leader.bic:
-                    ratio = round(held_nesting_ratio(inner, container), 1) + 0.0  # no "-0.0"
-                    why.append(
-                        f"{container.effect} (lower BIC) contains {inner.effect} and does not fit significantly better "
-                        f"(likelihood ratio {ratio:.1f} with the attitude error model held, "
-                        f"p = {held_nesting_p_value(inner, container):.2g})"
-                    )
             if encompassing:
                 why.append(encompassing)
             return str(best.effect), "; ".join(why)
@@ -146,8 +138,7 @@ def rivals(verdict: str, fits: list[ModelFit]) -> list[tuple[ModelFit, float]]:
     and a constant angular momentum both add a nearly constant body rate (held-out seeds 9301 and 9401: BIC within
     2.3). The verdict names the lower BIC; the rivals say that the log does not decide between them. A candidate of
     lower BIC than the verdict is none: the verdict replaced the lowest BIC by a likelihood-ratio test (it contains it
-    or encompasses it, or is contained in it and not fitted significantly worse, :func:`_prefer_nesting`,
-    :func:`_prefer_encompassing`, :func:`_no_better_containers`), which told them apart."""
+    or encompasses it, :func:`_prefer_nesting`, :func:`_prefer_encompassing`), which told them apart."""
     named = [f for f in fits if f.nameable]
     chosen = next((f for f in named if f.effect == verdict), None)
     if chosen is None:
@@ -167,32 +158,8 @@ JOINT_FIT_SLACK = 0.01
 
 
 def _leader(named: list[ModelFit], alpha: float) -> ModelFit:
-    """Of the significant and plausible candidates, the lowest BIC among those not set aside as containers no better
-    than what they contain (:func:`_no_better_containers`); or a container of it that fits significantly better
-    (:func:`_prefer_nesting`)."""
-    set_aside = {id(container) for container, _ in _no_better_containers(named, alpha)}
-    return _prefer_nesting(min((f for f in named if id(f) not in set_aside), key=lambda f: f.bic), named, alpha)
-
-
-def _no_better_containers(named: list[ModelFit], alpha: float) -> list[tuple[ModelFit, ModelFit]]:
-    """The candidates that contain another named one as a special case (``external_torque`` contains
-    ``initial_momentum``) and do not fit significantly better than it, each with that one (the lowest BIC of those):
-    the nesting test of :func:`_prefer_nesting` (the attitude error model held, :func:`held_nesting_p_value`, at
-    ``alpha / m`` with ``m`` the named candidates it contains), read the other way. They are set aside from the BIC's
-    choice, so that a container is named only when it fits significantly better than what it contains, whichever has
-    the lower BIC.
-
-    The BIC compares profile chi-squares, each fit's attitude error model refitted at it; a container can gain there by
-    taking the error model's wander for its own: held-out momentum log 11303 (``orbit7``, 20 Hz, a 1" tracker) was
-    named the torque containing it, its profile ratio 53.8 (all of it in the attitude channel, beyond the torque's 3 ln n
-    of BIC), its held ratio 0.0; the same motion with eight other noise draws is named the momentum every time."""
-    out = []
-    for container in named:
-        inner = [f for f in named if f.effect in EFFECT_TERMS[str(container.effect)].nests]
-        adequate = [f for f in inner if held_nesting_p_value(f, container) >= alpha / len(inner)]
-        if adequate:
-            out.append((container, min(adequate, key=lambda f: f.bic)))
-    return out
+    """Of the significant and plausible candidates, the lowest BIC, or a container of it (:func:`_prefer_nesting`)."""
+    return _prefer_nesting(min(named, key=lambda f: f.bic), named, alpha)
 
 
 def _challengers(leader: ModelFit, named: list[ModelFit]) -> list[ModelFit]:
