@@ -118,6 +118,16 @@ def encoder_tangents(t_s: FloatArray, q_rad: FloatArray) -> FloatArray:
     return np.concatenate((slopes[:1], 0.5 * (slopes[:-1] + slopes[1:]), slopes[-1:]))
 
 
+def hermite_step(
+    q0: FloatArray, q1: FloatArray, m0: FloatArray, m1: FloatArray, dt_s: FloatArray, s: FloatArray | float
+) -> tuple[FloatArray, FloatArray]:
+    """A cubic Hermite within a step and its rate at the fraction ``s`` (in [0, 1]) of the step: values ``q0``, ``q1``
+    at its ends, tangents ``m0``, ``m1`` (per s), the step's length ``dt_s``; the arrays broadcast together."""
+    h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, 3 * s**2 - 2 * s**3, s**3 - s**2
+    d00, d10, d01, d11 = 6 * s**2 - 6 * s, 3 * s**2 - 4 * s + 1, 6 * s - 6 * s**2, 3 * s**2 - 2 * s
+    return h00 * q0 + h10 * dt_s * m0 + h01 * q1 + h11 * dt_s * m1, (d00 * q0 + d01 * q1) / dt_s + d10 * m0 + d11 * m1
+
+
 def gauss_log(log: MeasurementLog) -> MeasurementLog:
     """The log's first sample as logged, then the joint motion at the two Gauss-Legendre nodes of each step (1 + 2(T-1)
     samples, node 1 then node 2 of each step): the cubic Hermite of the step through its two encoder samples with
@@ -133,11 +143,7 @@ def gauss_log(log: MeasurementLog) -> MeasurementLog:
     dq_out = np.empty((2 * n_steps, n_joints))
     omega_out = np.empty((2 * n_steps, 3))
     for node, s in enumerate(GAUSS_NODES):
-        # cubic Hermite basis on the step and its derivative, s in [0, 1]
-        h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, 3 * s**2 - 2 * s**3, s**3 - s**2
-        d00, d10, d01, d11 = 6 * s**2 - 6 * s, 3 * s**2 - 4 * s + 1, 6 * s - 6 * s**2, 3 * s**2 - 2 * s
-        q_out[node::2] = h00 * q[:-1] + h10 * dt * m[:-1] + h01 * q[1:] + h11 * dt * m[1:]
-        dq_out[node::2] = (d00 * q[:-1] + d01 * q[1:]) / dt + d10 * m[:-1] + d11 * m[1:]
+        q_out[node::2], dq_out[node::2] = hermite_step(q[:-1], q[1:], m[:-1], m[1:], dt, s)
         omega_out[node::2] = (1.0 - s) * omega[:-1] + s * omega[1:]
         t_out[node::2] = t[:-1] + s * dt[:, 0]
     return _resampled(log, t_out, q_out, dq_out, omega_out)

@@ -32,6 +32,7 @@ import numpy as np
 from scipy.fft import irfft, rfft, rfftfreq
 from scipy.spatial.transform import Rotation, Slerp
 
+from estimators.attitude_integration import hermite_step
 from estimators.problem import IdentificationModel
 from spaceid_gym.arrays import FloatArray
 from spaceid_gym.errors import SpaceIdInputError
@@ -66,10 +67,7 @@ def joint_state_at(log: MeasurementLog, delay_s: float) -> MeasurementLog:
     k = np.clip(np.searchsorted(t, times, side="right") - 1, 0, len(t) - 2)
     dt = (t[k + 1] - t[k])[:, None]
     s = (times - t[k])[:, None] / dt
-    h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, 3 * s**2 - 2 * s**3, s**3 - s**2
-    d00, d10, d01, d11 = 6 * s**2 - 6 * s, 3 * s**2 - 4 * s + 1, 6 * s - 6 * s**2, 3 * s**2 - 2 * s
-    q_at = h00 * q[k] + h10 * dt * dq[k] + h01 * q[k + 1] + h11 * dt * dq[k + 1]
-    dq_at = (d00 * q[k] + d01 * q[k + 1]) / dt + d10 * dq[k] + d11 * dq[k + 1]
+    q_at, dq_at = hermite_step(q[k], q[k + 1], dq[k], dq[k + 1], dt, s)
     quat = log.quat_base_to_inertial_wxyz
     if quat is not None:
         rotations = Rotation.from_quat(np.asarray(quat, dtype=float), scalar_first=True)
