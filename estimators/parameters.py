@@ -267,6 +267,11 @@ class WithEffects(Parameterisation):
         """The base parameterisation's unknowns (..., k_base)."""
         return np.asarray(theta, dtype=float)[..., : self.base.n_params]
 
+    def switched_off(self, theta: FloatArray) -> bool:
+        """Whether any term is off at ``theta`` (k,) in a way a local fit cannot leave
+        (:meth:`~estimators.models.effect_base.EffectTerm.switched_off`)."""
+        return any(t.switched_off(theta[part]) for t, part in self._slices.items())
+
     def term_parts(self, theta: FloatArray) -> dict[EffectTerm, FloatArray]:
         """Each term's unknowns (..., k_e)."""
         theta = np.asarray(theta, dtype=float)

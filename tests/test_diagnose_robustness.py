@@ -53,6 +53,7 @@ from estimators.diagnostics.diagnose import (
 from estimators.diagnostics.model_fit import ChannelWeights, ModelFit
 from estimators.diagnostics.suite import DIAGNOSTIC_EXCITATION
 from estimators.diagnostics.workflow import true_parameters
+from estimators.parameters import WithEffects
 from estimators.problem import IdentificationModel
 from spaceid_gym.arrays import FloatArray
 from spaceid_gym.datasets import simulate_episode
@@ -210,6 +211,35 @@ def test_a_long_period_pendulum_with_a_tilted_rod_is_found_by_its_own_scan() -> 
     assert d.best is not None and d.best.plausible and d.best.lr_statistic > 50.0
     assert d.best.physical["slosh_frequency_hz"] == pytest.approx(truth.slosh_frequency_hz, rel=0.3)
     assert d.best.physical["fuel_consumed_kg"] == pytest.approx(truth_of(env)["fuel_consumed_kg"], abs=4.0)
+
+
+def test_a_pendulum_whose_fit_stopped_without_mass_is_refined_from_a_minimum_with_it() -> None:
+    """Fresh log 11713 (``paper6``, 50 Hz, an exact attitude, 8.9 kg on a pendulum of period 7.9 s, its rod near the
+    base's x): the pendulum's fit on both channels started from the nested model's point (no slosh mass), which scored
+    best before refinement, and stayed without mass; the attitude then fitted its error model at no candidate and the
+    verdict, on the gyro alone, was ``none``. Refined again from the best gyro minimum with mass, the pendulum is named,
+    the fuel near the truth."""
+    case = draw_variation("slosh", 11713)
+    assert case.hidden.slosh_model == "pendulum"
+    env = simulate_variation(case, 60.0)
+    d = diagnose(IdentificationModel(env.robot, "fuel"), env.measurement_log())
+    assert d.verdict == "slosh", d.reason
+    assert d.best is not None and d.best.plausible and d.best.spec == "slosh[model=pendulum]"
+    assert d.best.physical["slosh_mass_kg"] == pytest.approx(case.hidden.slosh_mass_kg, rel=0.1)
+    assert d.best.physical["fuel_consumed_kg"] == pytest.approx(truth_of(env)["fuel_consumed_kg"], abs=1.0)
+
+
+def test_only_a_slosh_without_mass_is_switched_off(paper6: Robot) -> None:
+    """A slosh at its mass bound, to the tolerance a bounded fit stops at, is off; with mass, or a momentum at zero
+    (whose directions still switch it on), is not."""
+    params = IdentificationModel(paper6, "fuel", effects=["slosh[model=pendulum]", "initial_momentum"]).parameters
+    assert isinstance(params, WithEffects)
+    theta = params.nominal.copy()
+    slosh, momentum = params.terms
+    assert params.switched_off(theta) and slosh.switched_off(np.array([5e-13, 0.1, 0.05, 0.0, 0.0, 0.0]))
+    assert not momentum.switched_off(np.zeros(3))
+    theta[params.base.n_params] = 1e-3
+    assert not params.switched_off(theta)
 
 
 def test_a_payload_heavier_than_the_arm_is_named() -> None:

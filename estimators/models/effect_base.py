@@ -126,6 +126,12 @@ class EffectTerm(ABC):
         base parameters."""
         return self.starts(theta_base)
 
+    def switched_off(self, theta: FloatArray) -> bool:
+        """Whether at ``theta`` (k_e,) the effect is off in a way a local fit cannot leave: its prediction is the model's
+        without it and its other unknowns move nothing there (a slosh without mass); false by default (an effect at
+        zero, a momentum or a bias, still has the directions that switch it on)."""
+        return False
+
     def describes(self, hidden: Mapping[str, Any]) -> bool:
         """Whether this term, as configured, is the model that made the simulated effect ``hidden`` (``truth.json``'s
         ``hidden_effects``), not only one that can stand for it (a slosh pendulum for a spring-mass); true by default."""

@@ -19,6 +19,9 @@ from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.physics.inertia import PARAMS10_NAMES, RigidBodyInertia, skew, spatial_inertia_matrix
 from spaceid_gym.robots import Robot
 
+#: how close to its lower bound, in units of its scale, a slosh mass is taken for none (:meth:`Slosh.switched_off`)
+OFF_TOLERANCE = 1e-9
+
 #: the pendulum's search range of the rod's curvature, 1/m: rods from 5 cm, the hinge on either side of the mass
 ROD_CURVATURE_MAX = 20.0
 
@@ -264,6 +267,11 @@ class Slosh(EffectTerm):
         return out
 
     equivalent = moving_part  # a mass beyond the liquid left moves only that liquid: the same prediction
+
+    def switched_off(self, theta: FloatArray) -> bool:
+        """No slosh mass (its lower bound, 0 kg, to :data:`OFF_TOLERANCE` of its scale: a bounded least-squares fit
+        stops strictly inside its box, 5e-13 kg): the frequency, damping and rod then move nothing."""
+        return bool(theta[0] <= self.lower[0] + OFF_TOLERANCE * self.scale[0])
 
     def starts(self, theta_base: FloatArray | None = None) -> list[FloatArray]:
         """One per :attr:`START_FREQUENCIES_HZ`, with a tenth of the usable fuel sloshing, or half the liquid left
