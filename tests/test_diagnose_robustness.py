@@ -213,12 +213,12 @@ def test_a_long_period_pendulum_with_a_tilted_rod_is_found_by_its_own_scan() -> 
     assert d.best.physical["fuel_consumed_kg"] == pytest.approx(truth_of(env)["fuel_consumed_kg"], abs=4.0)
 
 
-def test_a_pendulum_whose_fit_stopped_without_mass_is_refined_from_a_minimum_with_it() -> None:
+def test_a_pendulum_fit_is_refined_from_a_point_with_slosh_mass() -> None:
     """Fresh log 11713 (``paper6``, 50 Hz, an exact attitude, 8.9 kg on a pendulum of period 7.9 s, its rod near the
     base's x): the pendulum's fit on both channels started from the nested model's point (no slosh mass), which scored
     best before refinement, and stayed without mass; the attitude then fitted its error model at no candidate and the
-    verdict, on the gyro alone, was ``none``. Refined again from the best gyro minimum with mass, the pendulum is named,
-    the fuel near the truth."""
+    verdict, on the gyro alone, was ``none``. Refined from the best point with slosh mass, the pendulum is named, the
+    fuel near the truth."""
     case = draw_variation("slosh", 11713)
     assert case.hidden.slosh_model == "pendulum"
     env = simulate_variation(case, 60.0)
