@@ -578,11 +578,12 @@ def _refined_on_both(
     if not on or len(on) == len(tried):
         return _joint_fit(problem, channel, weights, tried[int(np.argmin(scores))])
     theta = _joint_fit(problem, channel, weights, tried[min(on, key=lambda i: scores[i])])
+    value = joint_chi2(problem, channel, weights, theta)
     best_off = min((i for i in range(len(tried)) if off[i]), key=lambda i: scores[i])
-    if joint_chi2(problem, channel, weights, theta) <= scores[best_off]:
+    if value <= scores[best_off]:
         return theta
     other = _joint_fit(problem, channel, weights, tried[best_off])
-    return other if joint_chi2(problem, channel, weights, other) < joint_chi2(problem, channel, weights, theta) else theta
+    return other if joint_chi2(problem, channel, weights, other) < value else theta
 
 
 def _scored(
