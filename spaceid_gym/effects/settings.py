@@ -29,11 +29,11 @@ Catalogue (field names, frames and units)
   ``tank point - L a``, ``a = slosh_axis`` (unit vector, base frame, default base +z), so that at
   rest the mass sits at the tank point as in the spring model. In free fall there is no gravity to
   pull the pendulum back; the settled liquid's restoring effect (a small residual acceleration,
-  surface tension) is a torsional spring-damper on each hinge angle,
-  ``k_theta = m_s L^2 (2 pi f)^2`` (N m/rad), ``c_theta = 2 zeta m_s L^2 (2 pi f)`` (N m s/rad): for
-  small angles this is exactly a pendulum under the effective acceleration ``g_eff = L (2 pi f)^2``
-  along ``a`` (``f = sqrt(g_eff / L) / (2 pi)``), and its lateral force on the mass is the spring
-  model's ``k``, ``c``. The two models differ beyond the small-angle limit and in the rod: the
+  surface tension) is that of a pendulum under the effective acceleration ``g_eff = L (2 pi f)^2``
+  along ``a`` (``f = sqrt(g_eff / L) / (2 pi)``): the potential ``m_s g_eff L (1 - cos phi)``, ``phi``
+  the rod's angle from ``a``, at any angle, and the damper ``c`` on the mass's velocity. For small
+  angles its lateral force on the mass is the spring model's ``k``, ``c``; the two models differ
+  beyond the small-angle limit (the pendulum's restoring force is ``k L sin phi``) and in the rod: the
   pendulum mass cannot move along ``a``. ``slosh_length_m`` and ``slosh_axis`` are only for the
   pendulum (they default when it is chosen, so truth.json always holds them).
 * ``delay``: ``delay_s`` >= 0: the gyro stream lags the encoders, ``omega_meas(t_k) = omega(t_k - delay_s)``
@@ -255,8 +255,8 @@ class HiddenEffects:
     def slosh_stiffness_damping(self) -> tuple[float, float]:
         """Spring ``k = m (2 pi f)^2`` (N/m) and damper ``c = 2 zeta m (2 pi f)`` (N s/m) of the slosh mass.
 
-        For the pendulum these are the lateral stiffness and damping at the mass; its torsional spring-damper at
-        the hinge is ``k L^2`` (N m/rad) and ``c L^2`` (N m s/rad).
+        For the pendulum these are the lateral stiffness and damping at the mass for small angles: the effective
+        acceleration along its rest axis is ``k L / m`` (:meth:`spaceid_gym.sim.slosh.SloshBody.joint_force`).
         """
         if self.slosh_mass_kg is None:
             raise SpaceIdInputError("hidden effect 'slosh' is not set")

@@ -33,9 +33,10 @@ Hidden effects (:class:`~spaceid_gym.effects.HiddenEffects`)
   ``-k x - c dx``. The pendulum (``"pendulum"``): a universal joint at the hinge ``tank - L a``, two
   revolute joints about ``e1`` and then the turned ``e2`` (``(e1, e2, a)`` right-handed, base frame),
   the mass at ``L`` along the rod, which is ``a`` at zero angles; coordinates ``x`` the two angles
-  (rad), pulled back by the torsional spring-damper ``-k L^2 x - c L^2 dx`` (a pendulum under the
-  effective acceleration ``L (2 pi f)^2`` for small angles; the universal joint's gimbal lock at
-  90 deg is far from the small slosh angles). Either way the base twist still follows from the
+  (rad), pulled back as a pendulum under the effective acceleration ``L (2 pi f)^2`` along ``a``, at any
+  angle, and damped on the mass's velocity (:meth:`~spaceid_gym.sim.slosh.SloshBody.joint_force`; for small
+  angles the torsional spring-damper ``-k L^2 x - c L^2 dx``). The universal joint's chart is singular at
+  ``x1 = +-90 deg`` (the rod along ``e1``), where the step raises an error rather than lose accuracy. Either way the base twist still follows from the
   momentum, now with the slosh rates; the slosh accelerations follow from the equations of
   motion (CRBA + nonlinear effects) of the base and slosh coordinates with the arm accelerations
   known from the servo, the base wrench zero (or the external torque). The attitude and the slosh
@@ -286,6 +287,7 @@ class FreeFloatingSimulator:
                 k_v.append(stage[1])
             rot = rot @ so3_exp(_rk4_sum(h, k_omega))
             x, v = x + _rk4_sum(h, k_x), v + _rk4_sum(h, k_v)
+            self.slosh.check_chart(x, s.t_s + cuts[i + 1])
             end = 2 * i + 2
             rates = self._slosh_rates(s.t_s + times[end - 1], rot, x, v, q_t[end], dq_t[end], ddq_t[end])
         composite = self.data.Ycrb[1].copy()  # of the last evaluation: the end state
@@ -343,14 +345,14 @@ class FreeFloatingSimulator:
 
         Solves the base and slosh rows of ``M a + nle = tau`` for the base and slosh accelerations,
         the arm's ``ddq`` given: ``tau`` is the external torque on the base (base axes, zero without
-        the effect) and the spring-damper ``-k x - c dx`` on the slosh joints (:meth:`SloshBody.joint_stiffness_damping`).
+        the effect) and the restoring and damping force on the slosh joints (:meth:`SloshBody.joint_force`).
         """
         assert self.slosh is not None
         twist, p, mass = self._slosh_kinematics(t_s, rot_wb, x_slosh, dx_slosh, q_rad, dq_rad_s)
         nle = pin.nonLinearEffects(self.model, self.data, self._q_full, np.concatenate((twist, dq_rad_s, dx_slosh)))
         torque_base = np.zeros(3) if self._torque is None else rot_wb.T @ self._torque_world(t_s)
-        stiffness, damping = self.slosh.joint_stiffness_damping()
-        acc = slosh_acceleration(mass, nle, torque_base, stiffness, damping, x_slosh, dx_slosh, ddq_rad_s2)
+        force = self.slosh.joint_force(x_slosh, dx_slosh)
+        acc = slosh_acceleration(mass, nle, torque_base, force, ddq_rad_s2)
         return twist, acc, p
 
     def _momentum_at(self, t_s: float) -> FloatArray:

@@ -18,6 +18,10 @@ from spaceid_gym.physics.inertia import RigidBodyInertia, point_mass_inertia
 from spaceid_gym.physics.momentum import momentum_world_to_base
 from spaceid_gym.robots.robot import Robot
 
+#: the largest second hinge angle of the pendulum the simulator integrates, rad (:meth:`SloshBody.check_chart`): at 85
+#: deg the inertia about the first hinge axis is cos^2 = 0.8 % of the mass's ``m L^2``
+CHART_LIMIT_RAD = float(np.radians(85.0))
+
 
 @dataclass(frozen=True)
 class SloshBody:
@@ -26,7 +30,7 @@ class SloshBody:
     Attributes:
         mass_kg: the slosh mass ``m``, kg.
         stiffness_n_m, damping_n_s_m: the spring ``k`` (N/m) and damper ``c`` (N s/m) at the mass; for the
-            pendulum, its lateral equivalent (the torsional ones are :meth:`joint_stiffness_damping`).
+            pendulum, its lateral equivalent at small angles (the law at any angle is :meth:`joint_force`).
         anchor_m: the rest point of the mass (the tank point), base frame (3,), m.
         length_m: the pendulum's rod length ``L``, m; ``None`` for the spring model.
         rot_base_hinge: the pendulum's hinge frame ``[e1 e2 a]`` in the base frame (3, 3): the joints turn
@@ -58,11 +62,39 @@ class SloshBody:
 
     def joint_stiffness_damping(self) -> tuple[float, float]:
         """Stiffness and damping on each slosh joint coordinate: ``(k, c)`` (N/m, N s/m) for the spring model,
-        ``(k L^2, c L^2)`` (N m/rad, N m s/rad) for the pendulum (the same lateral force at the mass, small angles)."""
+        ``(k L^2, c L^2)`` (N m/rad, N m s/rad) for the pendulum, its small-angle limit (the same lateral force at the
+        mass; :meth:`joint_force` is the law at any angle)."""
         if self.length_m is None:
             return self.stiffness_n_m, self.damping_n_s_m
         square = self.length_m * self.length_m
         return self.stiffness_n_m * square, self.damping_n_s_m * square
+
+    def joint_force(self, x: FloatArray, dx: FloatArray) -> FloatArray:
+        """The restoring and damping generalized force on the slosh joints at coordinates and rates ``x, dx``.
+
+        The spring model: ``-k x - c dx`` (N). The pendulum (N m): the mass under the effective acceleration ``g = k L /
+        m`` along the rod's rest axis (Abramson, NASA SP-106, ch. 6), the potential ``V = k L^2 (1 - cos x0 cos x1)``
+        (``cos x0 cos x1`` is the rod's cosine with its rest axis), and the damper ``c`` on the mass's velocity, the
+        dissipation ``c L^2 (cos^2 x1 dx0^2 + dx1^2) / 2``: ``-k L^2 [sin x0 cos x1, cos x0 sin x1] - c L^2 [cos^2
+        x1 dx0, dx1]``. Both are the spring's ``-k L^2 x - c L^2 dx`` at small angles and coordinate-free (the same
+        pendulum whatever the hinge's chart)."""
+        stiffness, damping = self.joint_stiffness_damping()
+        if self.length_m is None:
+            return -stiffness * x - damping * dx
+        s0, c0, s1, c1 = np.sin(x[0]), np.cos(x[0]), np.sin(x[1]), np.cos(x[1])
+        return -stiffness * np.array([s0 * c1, c0 * s1]) - damping * np.array([c1 * c1 * dx[0], dx[1]])
+
+    def check_chart(self, x: FloatArray, t_s: float) -> None:
+        """Raise :class:`SpaceIdInputError` if the pendulum's second hinge angle ``x[1]`` is beyond
+        :data:`CHART_LIMIT_RAD` at time ``t_s``: the universal joint's chart is singular at ``x1 = +-90 deg`` (the rod
+        along ``e1``, where turning about ``e1`` moves nothing), and the fixed-step integration loses its accuracy
+        before it. Nothing for the spring model."""
+        if self.is_pendulum and not abs(float(x[1])) <= CHART_LIMIT_RAD:
+            raise SpaceIdInputError(
+                f"hidden effect 'slosh': the pendulum swung to {np.degrees(x[1]):.1f} deg about its second hinge axis at "
+                f"t = {t_s:.3f} s, beyond the {np.degrees(CHART_LIMIT_RAD):.0f} deg its universal joint's chart allows "
+                "(singular at 90 deg); a longer rod, a higher slosh frequency or a gentler excitation swings it less"
+            )
 
     def displacement(self, x: FloatArray, dx: FloatArray) -> tuple[FloatArray, FloatArray]:
         """The mass's displacement from its rest point and its rate relative to the base (3,), base axes, m and
@@ -190,20 +222,17 @@ def slosh_acceleration(
     mass: FloatArray,
     nle: FloatArray,
     torque_base: FloatArray,
-    stiffness: float,
-    damping: float,
-    slosh: FloatArray,
-    slosh_rate: FloatArray,
+    slosh_force: FloatArray,
     ddq: FloatArray,
 ) -> FloatArray:
     """Slosh joint accelerations (s,) from the base and slosh rows of ``M a + nle = tau``, the arm's ``ddq`` (n,) given.
 
-    ``tau`` = ``[0, 0, 0, torque_base]`` on the base (a pure torque, base axes) and ``-k x - c dx`` on
-    the s slosh joints (s = ``slosh.shape[0]``); ``mass`` as in :func:`slosh_base_twist` (upper triangle read),
+    ``tau`` = ``[0, 0, 0, torque_base]`` on the base (a pure torque, base axes) and ``slosh_force`` (s,) on the s
+    slosh joints (:meth:`SloshBody.joint_force`); ``mass`` as in :func:`slosh_base_twist` (upper triangle read),
     ``nle`` (6 + n + s,).
     """
     n = ddq.shape[0]
-    size = 6 + slosh.shape[0]
+    size = 6 + slosh_force.shape[0]
     free = np.empty(size, dtype=np.int64)
     free[:6] = np.arange(6)
     free[6:] = np.arange(6 + n, size + n)
@@ -219,5 +248,5 @@ def slosh_acceleration(
             coupling += mass[min(i, 6 + k), max(i, 6 + k)] * ddq[k]
         rhs[a] = -coupling - nle[i]
     rhs[3:6] += torque_base
-    rhs[6:] += -stiffness * slosh - damping * slosh_rate
+    rhs[6:] += slosh_force
     return np.linalg.solve(lhs, rhs)[6:]
