@@ -31,10 +31,10 @@ Catalogue (field names, frames and units)
   pull the pendulum back; the settled liquid's restoring effect (a small residual acceleration,
   surface tension) is that of a pendulum under the effective acceleration ``g_eff = L (2 pi f)^2``
   along ``a`` (``f = sqrt(g_eff / L) / (2 pi)``): the potential ``m_s g_eff L (1 - cos phi)``, ``phi``
-  the rod's angle from ``a``, at any angle, and the damper ``c`` on the mass's velocity. For small
-  angles its lateral force on the mass is the spring model's ``k``, ``c``; the two models differ
-  beyond the small-angle limit (the pendulum's restoring force is ``k L sin phi``) and in the rod: the
-  pendulum mass cannot move along ``a``. ``slosh_length_m`` and ``slosh_axis`` are only for the
+  the rod's angle from ``a``, at any angle, and the damper ``c`` on the mass's velocity relative to
+  the base. For small angles its lateral force on the mass is the spring model's ``k``, ``c``; the
+  two models differ beyond the small-angle limit (the pendulum's restoring force is ``k L sin phi``)
+  and in the rod: the pendulum mass cannot move along ``a``. ``slosh_length_m`` and ``slosh_axis`` are only for the
   pendulum (they default when it is chosen, so truth.json always holds them).
 * ``delay``: ``delay_s`` >= 0: the gyro stream lags the encoders, ``omega_meas(t_k) = omega(t_k - delay_s)``
   (any real delay, not only whole samples).

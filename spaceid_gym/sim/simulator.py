@@ -34,12 +34,13 @@ Hidden effects (:class:`~spaceid_gym.effects.HiddenEffects`)
   revolute joints about ``e1`` and then the turned ``e2`` (``(e1, e2, a)`` right-handed, base frame),
   the mass at ``L`` along the rod, which is ``a`` at zero angles; coordinates ``x`` the two angles
   (rad), pulled back as a pendulum under the effective acceleration ``L (2 pi f)^2`` along ``a``, at any
-  angle, and damped on the mass's velocity (:meth:`~spaceid_gym.sim.slosh.SloshBody.joint_force`; for small
-  angles the torsional spring-damper ``-k L^2 x - c L^2 dx``). The universal joint's chart is singular at
-  ``x1 = +-90 deg`` (the rod along ``e1``), where the step raises an error rather than lose accuracy. Either way the base twist still follows from the
-  momentum, now with the slosh rates; the slosh accelerations follow from the equations of
-  motion (CRBA + nonlinear effects) of the base and slosh coordinates with the arm accelerations
-  known from the servo, the base wrench zero (or the external torque). The attitude and the slosh
+  angle, and damped on the mass's velocity relative to the base
+  (:meth:`~spaceid_gym.sim.slosh.SloshBody.joint_force`; for small angles the torsional spring-damper
+  ``-k L^2 x - c L^2 dx``). The universal joint's chart is singular at ``x1 = +-90 deg`` (the rod along
+  ``e1``): a start or a step beyond 85 deg raises an error rather than lose accuracy. Either way the
+  base twist still follows from the momentum, now with the slosh rates; the slosh accelerations
+  follow from the equations of motion (CRBA + nonlinear effects) of the base and slosh coordinates
+  with the arm accelerations known from the servo, the base wrench zero (or the external torque). The attitude and the slosh
   state ``(x, dx)`` are integrated together by the same RKMK4 (classical RK4 for ``x, dx``).
 * ``delay``: :meth:`FreeFloatingSimulator.state_at` evaluates the trajectory at an earlier time by
   integrating from the start of the control period that contains it (the joint motion is closed form).

@@ -70,11 +70,13 @@ class SloshBody:
         return self.stiffness_n_m * square, self.damping_n_s_m * square
 
     def joint_force(self, x: FloatArray, dx: FloatArray) -> FloatArray:
-        """The restoring and damping generalized force on the slosh joints at coordinates and rates ``x, dx``.
+        """The restoring and damping generalized force on the slosh joints at coordinates and rates ``x, dx`` (m and
+        m/s for the spring, rad and rad/s for the pendulum).
 
         The spring model: ``-k x - c dx`` (N). The pendulum (N m): the mass under the effective acceleration ``g = k L /
         m`` along the rod's rest axis (Abramson, NASA SP-106, ch. 6), the potential ``V = k L^2 (1 - cos x0 cos x1)``
-        (``cos x0 cos x1`` is the rod's cosine with its rest axis), and the damper ``c`` on the mass's velocity, the
+        (``cos x0 cos x1`` is the rod's cosine with its rest axis), and the damper ``c`` on the mass's velocity relative to
+        the base, the
         dissipation ``c L^2 (cos^2 x1 dx0^2 + dx1^2) / 2``: ``-k L^2 [sin x0 cos x1, cos x0 sin x1] - c L^2 [cos^2
         x1 dx0, dx1]``. Both are the spring's ``-k L^2 x - c L^2 dx`` at small angles and coordinate-free (the same
         pendulum whatever the hinge's chart)."""
@@ -85,10 +87,11 @@ class SloshBody:
         return -stiffness * np.array([s0 * c1, c0 * s1]) - damping * np.array([c1 * c1 * dx[0], dx[1]])
 
     def check_chart(self, x: FloatArray, t_s: float) -> None:
-        """Raise :class:`SpaceIdInputError` if the pendulum's second hinge angle ``x[1]`` is beyond
-        :data:`CHART_LIMIT_RAD` at time ``t_s``: the universal joint's chart is singular at ``x1 = +-90 deg`` (the rod
-        along ``e1``, where turning about ``e1`` moves nothing), and the fixed-step integration loses its accuracy
-        before it. Nothing for the spring model."""
+        """Raise :class:`SpaceIdInputError` if the pendulum's second hinge angle ``x[1]`` (rad) is beyond
+        :data:`CHART_LIMIT_RAD` at time ``t_s`` (s): the universal joint's chart is singular at ``x1 = +-90 deg`` (the
+        rod along ``e1``, where turning about ``e1`` moves nothing), and the fixed-step integration loses its accuracy
+        before it. A motion started within the limit (:func:`initial_slosh`) meets it before the singularity. Nothing
+        for the spring model."""
         if self.is_pendulum and not abs(float(x[1])) <= CHART_LIMIT_RAD:
             raise SpaceIdInputError(
                 f"hidden effect 'slosh': the pendulum swung to {np.degrees(x[1]):.1f} deg about its second hinge axis at "
@@ -148,6 +151,11 @@ def initial_slosh(slosh: SloshBody, slosh_m: FloatArray | None, slosh_angles_rad
     x0 = np.zeros(size) if given is None else np.asarray(given, dtype=float)
     if x0.shape != (size,) or not np.all(np.isfinite(x0)):
         raise SpaceIdInputError(f"reset: {name} expected {size} finite numbers ({unit}), got {given!r}")
+    if slosh.is_pendulum and not abs(x0[1]) <= CHART_LIMIT_RAD:
+        raise SpaceIdInputError(
+            f"reset: slosh_angles_rad[1] expected within +-{CHART_LIMIT_RAD:.4f} rad ({np.degrees(CHART_LIMIT_RAD):.0f} deg, "
+            f"the universal joint's chart is singular at 90 deg), got {x0[1]!r}"
+        )
     return x0
 
 
