@@ -9,7 +9,12 @@ effect's fit. With ``--delay-at-truth`` (a ``delay`` log):
 the delay that fits best with every other unknown at the truth, and the residual at the true delay over the noise, at
 the log's own rate and at 50 and 100 Hz (the same draw, the rate changed). With ``--held-noise`` (a log with attitude):
 each candidate's attitude gain again, its fit refined with the attitude error model held at the baseline's instead of
-refitted (profiled) at the candidate. With ``--noise-seed``: the same motion measured with new noise.
+refitted (profiled) at the candidate. With ``--noise-seed``: the same motion measured with new noise. With
+``--from-truth``: the diagnosis's fit of the hidden effect (each of its variants that describes the truth) against
+its refit from the true values (the diagnosis's weights, the attitude's error model profiled; on the gyro alone where
+the diagnosis set the attitude aside), their effect unknowns, the fuel consumed's error and the attitude residual's
+whiteness p. ``--fix`` pins further axes, as the
+suite's (``--fix slosh_model=pendulum``).
 
     python benchmarks/diagnose_case.py none 9737
     python benchmarks/diagnose_case.py delay 9759 --delay-at-truth
@@ -18,6 +23,8 @@ refitted (profiled) at the candidate. With ``--noise-seed``: the same motion mea
     python benchmarks/diagnose_case.py none 10229 --attitude exact
     python benchmarks/diagnose_case.py none 10238 --attitude exact --noise-seed 1
     python benchmarks/diagnose_case.py initial_momentum 10834 --substeps 8
+    python benchmarks/diagnose_case.py slosh 11082 --from-truth
+    python benchmarks/diagnose_case.py slosh 11987 --fix slosh_model=pendulum
 
 ``--substeps`` simulates with that many integration steps per sample (default: the env's, no step longer than 0.02 s:
 one at 50 and 100 Hz, three at 20 Hz; ``--substeps 1`` is the simulator before that bound).
@@ -32,12 +39,12 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from estimators.attitude_channel import AttitudeChannel
-from estimators.diagnostics.diagnose import Diagnosis, candidate_model, diagnose, fit_model
-from estimators.diagnostics.model_fit import gyro_log
+from estimators.diagnostics.diagnose import Diagnosis, candidate_model, diagnose, fit_model, simulated_variant
+from estimators.diagnostics.model_fit import ModelFit, gyro_log
 from estimators.diagnostics.workflow import ParameterErrors, apply_effect, baseline_estimate, parameter_errors, true_parameters
 from estimators.problem import IdentificationModel
 from spaceid_gym.log import MeasurementLog
-from spaceid_gym.variations import draw_variation, simulate_variation, truth_of
+from spaceid_gym.variations import draw_variation, parse_fixed, simulate_variation, truth_of
 
 
 def delay_at_truth(seed: int, fixed: dict[str, Any], duration_s: float) -> str:
@@ -85,6 +92,34 @@ def held_noise_gains(model: IdentificationModel, log: MeasurementLog, d: Diagnos
     return lines
 
 
+def refit_from_truth(
+    model: IdentificationModel, log: MeasurementLog, d: Diagnosis, truth: dict[str, Any], effect: str
+) -> list[str]:
+    """The model of ``effect`` that made the log (:func:`simulated_variant`, e.g. the pendulum): the diagnosis's fit of
+    it (when that variant was the one kept) and its refit on both channels from the true values (the diagnosis's
+    weights, the attitude error model profiled), their effect unknowns, the fuel consumed's error (kg) and the attitude
+    residual's whiteness p."""
+    spec = simulated_variant(model.robot, effect, truth.get("hidden_effects") or {})
+    extended = None if spec is None else candidate_model(model, spec)
+    theta = None if extended is None else true_parameters(extended, truth)
+    if spec is None or extended is None or theta is None:
+        return [f"  no true values of {effect} for the fuel model"]
+    refit = fit_model(extended, log, starts=[theta], effect=effect, weights=d.weights, profile_noise=True)[0]
+    kept = next((c for c in d.candidates if c.effect == effect), None)
+    k = len(model.parameters.nominal)  # the model's own unknowns come first
+    fits: list[tuple[str, ModelFit | None]] = [("truth", None)]
+    if kept is not None and kept.spec == spec:
+        fits.append(("diagnosis", kept))
+    lines = [] if len(fits) > 1 else [f"  the diagnosis kept {kept.spec if kept else 'no fit'} of {effect}, not {spec}"]
+    if d.attitude_rejected:
+        lines.append("  the attitude was set aside: the refit is on the gyro alone")
+    for label, fit in [*fits, ("from truth", refit)]:
+        values = theta if fit is None else fit.theta
+        tail = "" if fit is None else f"  fuel {values[0] - theta[0]:+.3g} kg  whiteness p {fit.attitude_white_p:.2g}"
+        lines.append(f"  {spec:22s} {label:10s} {np.array2string(values[k:], precision=4)}{tail}")
+    return lines
+
+
 def _errors_text(label: str, errors: ParameterErrors | None) -> str:
     if errors is None:
         return f"{label}: no fuel unknowns"
@@ -101,6 +136,8 @@ def main() -> None:
     parser.add_argument("--rate", type=int, default=None, help="the sample rate pinned (Hz; the draw's otherwise)")
     parser.add_argument("--attitude", default=None, help="the attitude source pinned (as the suite's --fix attitude=...)")
     parser.add_argument("--held-noise", action="store_true", help="attitude gains with the baseline's error model held")
+    parser.add_argument("--from-truth", action="store_true", help="the hidden effect's fit against its refit from the truth")
+    parser.add_argument("--fix", default=None, help="further axes pinned, as the suite's --fix (e.g. slosh_model=pendulum)")
     parser.add_argument(
         "--noise-seed", type=int, default=None, help="the same motion measured with new noise (the env's noise_seed)"
     )
@@ -108,7 +145,9 @@ def main() -> None:
         "--substeps", type=int, default=None, help="the simulator's integration steps per sample (default: the env's)"
     )
     args = parser.parse_args()
-    fixed = {} if args.rate is None else {"rate_hz": args.rate}
+    fixed = parse_fixed(args.fix)
+    if args.rate is not None:
+        fixed["rate_hz"] = args.rate
     if args.attitude is not None:
         fixed["attitude"] = args.attitude
     case = draw_variation(args.effect, args.seed, fixed or None)
@@ -139,6 +178,8 @@ def main() -> None:
         print(_errors_text(f"with {d.best.effect}", parameter_errors(extended, log, estimate, truth)))
     if args.held_noise:
         print("\n".join(held_noise_gains(model, log, d)))
+    if args.from_truth:
+        print("\n".join(refit_from_truth(model, log, d, truth, args.effect)))
     if args.delay_at_truth:
         for rate in (None, 50, 100):
             print(delay_at_truth(args.seed, fixed if rate is None else {**fixed, "rate_hz": rate}, args.seconds))
