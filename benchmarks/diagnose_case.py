@@ -10,10 +10,10 @@ the delay that fits best with every other unknown at the truth, and the residual
 the log's own rate and at 50 and 100 Hz (the same draw, the rate changed). With ``--held-noise`` (a log with attitude):
 each candidate's attitude gain again, its fit refined with the attitude error model held at the baseline's instead of
 refitted (profiled) at the candidate. With ``--noise-seed``: the same motion measured with new noise. With
-``--from-truth``: the diagnosis's fit of the hidden effect (each of its variants that describes the truth) against
-its refit from the true values (the diagnosis's weights, the attitude's error model profiled; on the gyro alone where
-the diagnosis set the attitude aside), their effect unknowns, the fuel consumed's error and the attitude residual's
-whiteness p. ``--fix`` pins further axes, as the
+``--from-truth``: for the model of the hidden effect that made the log (the pendulum or the spring-mass), the
+diagnosis's fit (when it kept that model) against the refit from the true values (the diagnosis's weights, the
+attitude's error model profiled; on the gyro alone where the diagnosis set the attitude aside), their effect
+unknowns, the fuel consumed's error and the attitude residual's whiteness p. ``--fix`` pins further axes, as the
 suite's (``--fix slosh_model=pendulum``).
 
     python benchmarks/diagnose_case.py none 9737
@@ -96,9 +96,9 @@ def refit_from_truth(
     model: IdentificationModel, log: MeasurementLog, d: Diagnosis, truth: dict[str, Any], effect: str
 ) -> list[str]:
     """The model of ``effect`` that made the log (:func:`simulated_variant`, e.g. the pendulum): the diagnosis's fit of
-    it (when that variant was the one kept) and its refit on both channels from the true values (the diagnosis's
-    weights, the attitude error model profiled), their effect unknowns, the fuel consumed's error (kg) and the attitude
-    residual's whiteness p."""
+    it (when that variant was the one kept) and its refit from the true values (the diagnosis's weights: both channels,
+    the attitude error model profiled, or the gyro alone where the diagnosis set the attitude aside), their effect
+    unknowns, the fuel consumed's error (kg) and the attitude residual's whiteness p."""
     spec = simulated_variant(model.robot, effect, truth.get("hidden_effects") or {})
     extended = None if spec is None else candidate_model(model, spec)
     theta = None if extended is None else true_parameters(extended, truth)

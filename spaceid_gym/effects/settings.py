@@ -34,8 +34,8 @@ Catalogue (field names, frames and units)
   the rod's angle from ``a``, at any angle, and the damper ``c`` on the mass's velocity relative to
   the base. For small angles its lateral force on the mass is the spring model's ``k``, ``c``; the
   two models differ beyond the small-angle limit (the pendulum's restoring force is ``k L sin phi``)
-  and in the rod: the pendulum mass cannot move along ``a``. ``slosh_length_m`` and ``slosh_axis`` are only for the
-  pendulum (they default when it is chosen, so truth.json always holds them).
+  and in the rod: the pendulum mass cannot move along ``a``. ``slosh_length_m`` and ``slosh_axis``
+  are only for the pendulum (they default when it is chosen, so truth.json always holds them).
 * ``delay``: ``delay_s`` >= 0: the gyro stream lags the encoders, ``omega_meas(t_k) = omega(t_k - delay_s)``
   (any real delay, not only whole samples).
 * ``external_torque``: ``external_torque_Nm`` (3,) constant torque and ``external_torque_rate_Nm_s``

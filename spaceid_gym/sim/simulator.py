@@ -40,8 +40,9 @@ Hidden effects (:class:`~spaceid_gym.effects.HiddenEffects`)
   ``e1``): a start or a step beyond 85 deg raises an error rather than lose accuracy. Either way the
   base twist still follows from the momentum, now with the slosh rates; the slosh accelerations
   follow from the equations of motion (CRBA + nonlinear effects) of the base and slosh coordinates
-  with the arm accelerations known from the servo, the base wrench zero (or the external torque). The attitude and the slosh
-  state ``(x, dx)`` are integrated together by the same RKMK4 (classical RK4 for ``x, dx``).
+  with the arm accelerations known from the servo, the base wrench zero (or the external torque).
+  The attitude and the slosh state ``(x, dx)`` are integrated together by the same RKMK4 (classical
+  RK4 for ``x, dx``).
 * ``delay``: :meth:`FreeFloatingSimulator.state_at` evaluates the trajectory at an earlier time by
   integrating from the start of the control period that contains it (the joint motion is closed form).
 * ``gyro_bias`` / ``gyro_scale`` belong to the sensors (:class:`~spaceid_gym.sim.sensors.SensorModel`).

@@ -75,11 +75,10 @@ class SloshBody:
 
         The spring model: ``-k x - c dx`` (N). The pendulum (N m): the mass under the effective acceleration ``g = k L /
         m`` along the rod's rest axis (Abramson, NASA SP-106, ch. 6), the potential ``V = k L^2 (1 - cos x0 cos x1)``
-        (``cos x0 cos x1`` is the rod's cosine with its rest axis), and the damper ``c`` on the mass's velocity relative to
-        the base, the
-        dissipation ``c L^2 (cos^2 x1 dx0^2 + dx1^2) / 2``: ``-k L^2 [sin x0 cos x1, cos x0 sin x1] - c L^2 [cos^2
-        x1 dx0, dx1]``. Both are the spring's ``-k L^2 x - c L^2 dx`` at small angles and coordinate-free (the same
-        pendulum whatever the hinge's chart)."""
+        (``cos x0 cos x1`` is the rod's cosine with its rest axis), and the damper ``c`` on the mass's velocity relative
+        to the base, the dissipation ``c L^2 (cos^2 x1 dx0^2 + dx1^2) / 2``: ``-k L^2 [sin x0 cos x1, cos x0 sin x1] -
+        c L^2 [cos^2 x1 dx0, dx1]``. Both are the spring's ``-k L^2 x - c L^2 dx`` at small angles and coordinate-free
+        (the same pendulum whatever the hinge's chart)."""
         stiffness, damping = self.joint_stiffness_damping()
         if self.length_m is None:
             return -stiffness * x - damping * dx
