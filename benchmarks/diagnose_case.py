@@ -40,9 +40,10 @@ from scipy.optimize import minimize_scalar
 
 from estimators.attitude_channel import AttitudeChannel
 from estimators.diagnostics.diagnose import Diagnosis, candidate_model, diagnose, fit_model, simulated_variant
-from estimators.diagnostics.model_fit import ModelFit, gyro_log
+from estimators.diagnostics.model_fit import ModelFit, gyro_log, joint_objective
 from estimators.diagnostics.workflow import ParameterErrors, apply_effect, baseline_estimate, parameter_errors, true_parameters
 from estimators.problem import IdentificationModel
+from spaceid_gym.errors import SpaceIdInputError
 from spaceid_gym.log import MeasurementLog
 from spaceid_gym.variations import draw_variation, parse_fixed, simulate_variation, truth_of
 
@@ -98,7 +99,8 @@ def refit_from_truth(
     """The model of ``effect`` that made the log (:func:`simulated_variant`, e.g. the pendulum): the diagnosis's fit of
     it (when that variant was the one kept) and its refit from the true values (the diagnosis's weights: both channels,
     the attitude error model profiled, or the gyro alone where the diagnosis set the attitude aside), their effect
-    unknowns, the fuel consumed's error (kg) and the attitude residual's whiteness p."""
+    unknowns, the fuel consumed's error (kg), the attitude residual's whiteness p and, with attitude, the chi-square
+    the fits are ranked by (:func:`~estimators.diagnostics.model_fit.joint_objective`)."""
     spec = simulated_variant(model.robot, effect, truth.get("hidden_effects") or {})
     extended = None if spec is None else candidate_model(model, spec)
     theta = None if extended is None else true_parameters(extended, truth)
@@ -116,6 +118,8 @@ def refit_from_truth(
     for label, fit in [*fits, ("from truth", refit)]:
         values = theta if fit is None else fit.theta
         tail = "" if fit is None else f"  fuel {values[0] - theta[0]:+.3g} kg  whiteness p {fit.attitude_white_p:.2g}"
+        if fit is not None and d.weights is not None:
+            tail += f"  chi-square {joint_objective(fit, d.weights):.1f}"
         lines.append(f"  {spec:22s} {label:10s} {np.array2string(values[k:], precision=4)}{tail}")
     return lines
 
@@ -145,11 +149,17 @@ def main() -> None:
         "--substeps", type=int, default=None, help="the simulator's integration steps per sample (default: the env's)"
     )
     args = parser.parse_args()
-    fixed = parse_fixed(args.fix)
-    if args.rate is not None:
-        fixed["rate_hz"] = args.rate
-    if args.attitude is not None:
-        fixed["attitude"] = args.attitude
+    try:
+        fixed = parse_fixed(args.fix)
+    except SpaceIdInputError as exc:
+        parser.error(f"--fix: {exc}")
+    for axis, value in (("rate_hz", args.rate), ("attitude", args.attitude)):
+        if value is not None and axis in fixed:
+            parser.error(f"--fix: {axis} given there and by its own option; give it once")
+        if value is not None:
+            fixed[axis] = value
+    if args.from_truth and args.effect == "none":
+        parser.error("--from-truth: a clean log has no hidden effect to refit")
     case = draw_variation(args.effect, args.seed, fixed or None)
     redrawn = "" if args.noise_seed is None else f", noise seed {args.noise_seed}"
     print(f"{args.effect} {args.seed}: {case.robot}, {case.rate_hz} Hz, {case.attitude}, noise x{case.noise_scale:.2f}{redrawn}")

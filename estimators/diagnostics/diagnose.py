@@ -671,10 +671,12 @@ def _fit_candidate(
     likelihood ratio of 3.4, its own scan ranks 0.026-0.033 Hz first and the fit from the truth reaches 149). The grid
     is scored with the model's own unknowns profiled out to first order on ``basis``
     (:func:`~estimators.diagnostics.model_fit.nuisance_basis` at the baseline). Where the term cannot act at the
-    baseline (a missing slosh had it consume all the fuel), the fit is made again from the interior start alone and the
-    better kept: on fresh log 12006 (``quick3``, 50 Hz, an exact attitude, 0.066 kg sloshing of the 0.13 kg left) the
-    scan's best points held 0.2-0.4 g of slosh, the refinement from them stayed at 18,006 under the baseline's error
-    model, from the interior start it reached the truth's basin at 17,618 (the truth 17,629). A strong fit (:func:`_strong`) under a
+    baseline (its grid is empty: a slosh with less than ``Slosh.GRID_MIN_LIQUID_FRACTION`` of the usable fuel left
+    there, as when a missing slosh has the model as given consume all the fuel) and the log has attitude, the fit is
+    made again from the interior start alone and the better kept. On fresh log 12006 (``quick3``, 50 Hz, an exact
+    attitude, 0.066 kg sloshing of the 0.13 kg left) the scan's best points held 0.2-0.4 g of slosh and the
+    refinement from them stayed there (18,006.4 on both channels, the attitude's error model profiled); from the
+    interior start it reaches the truth's basin (17,440.3). A strong fit (:func:`_strong`) under a
     propagated attitude error model is fitted again with that model searched afresh at it, and the better kept."""
     extended = candidate_model(model, spec)
     params = extended.parameters
@@ -686,7 +688,7 @@ def _fit_candidate(
     n0 = len(baseline.theta)  # the model's own unknowns (base and effects already in it), then the candidate's
     grid = [np.concatenate((baseline.theta, s)) for s in term.grid(baseline.theta[:k_base])]
     acts_at_baseline = bool(grid)
-    if not grid:
+    if not acts_at_baseline:
         # the term cannot act at the baseline (a missing slosh can drag it to the fuel bound: no liquid left): the scan
         # at points on the way from the baseline to the interior start instead
         for share in SCAN_SHARES_TOWARD_INTERIOR:
@@ -695,15 +697,15 @@ def _fit_candidate(
     grid += [np.concatenate((v.theta[:n0], s)) for v in other_variants for s in term.grid_from_variant(v.theta[n0:])]
     extended_channel = None if channel is None else AttitudeChannel.of(extended, log, channel.coupling, channel.reference)
     scanned = best_of_grid(problem, grid, extended_channel, weights, basis)
-    starts = [*scanned, np.concatenate((restart, term.starts(restart[:k_base])[0]))]
+    interior = np.concatenate((restart, term.starts(restart[:k_base])[0]))
+    starts = [*scanned, interior]
     starts.append(np.concatenate((baseline.theta, term.nominal)))  # the baseline itself: the nested model's fit
     fit = fit_model(extended, log, starts=starts, effect=term.name, weights=weights, problem=problem, profile_noise=True)[0]
     if not acts_at_baseline and channel is not None and weights is not None:
         # the scan's best points on the way to the interior start can be all but off (a slosh of a fraction of a gram),
         # and the fit on both channels, refined from the best of them, stays there: fitted again from the interior
-        # start alone, each basin it reaches refined on both channels, and the better kept
-        interior = [starts[len(scanned)]]
-        fit = _better_of_refit(extended, log, fit, interior, weights.gyro_std_rad_s, weights, channel, problem, each_basin=True)
+        # start alone (its gyro minimum refined on both channels), and the better kept
+        fit = _better_of_refit(extended, log, fit, [interior], weights.gyro_std_rad_s, weights, channel, problem, each_basin=True)
     return _under_own_error_model(extended, log, fit, starts, baseline, weights, channel, problem)
 
 
