@@ -33,6 +33,7 @@ one at 50 and 100 Hz, three at 20 Hz; ``--substeps 1`` is the simulator before t
 from __future__ import annotations
 
 import argparse
+import math
 from typing import Any
 
 import numpy as np
@@ -99,14 +100,17 @@ def refit_from_truth(
     """The model of ``effect`` that made the log (:func:`simulated_variant`, e.g. the pendulum): the diagnosis's fit of
     it (when that variant was the one kept) and its refit from the true values (the diagnosis's weights: both channels,
     the attitude error model profiled, or the gyro alone where the diagnosis set the attitude aside), their effect
-    unknowns, the fuel consumed's error (kg), the attitude residual's whiteness p and, with attitude, the chi-square
+    unknowns, the gyro residual's RMS over the simulated gyro noise, the fuel consumed's error (kg), the attitude residual's whiteness
+    p and, with attitude, the chi-square
     the fits are ranked by (:func:`~estimators.diagnostics.model_fit.joint_objective`)."""
     spec = simulated_variant(model.robot, effect, truth.get("hidden_effects") or {})
     extended = None if spec is None else candidate_model(model, spec)
     theta = None if extended is None else true_parameters(extended, truth)
     if spec is None or extended is None or theta is None:
         return [f"  no true values of {effect} for the fuel model"]
-    refit = fit_model(extended, log, starts=[theta], effect=effect, weights=d.weights, profile_noise=True)[0]
+    problem = extended.problem(log)
+    noise = float(truth["noise"]["gyro_std_rad_s"])  # the simulated gyro's, per sample (as the matrix's figures)
+    refit = fit_model(extended, log, starts=[theta], effect=effect, weights=d.weights, problem=problem, profile_noise=True)[0]
     kept = next((c for c in d.candidates if c.effect == effect), None)
     k = len(model.parameters.nominal)  # the model's own unknowns come first
     fits: list[tuple[str, ModelFit | None]] = [("truth", None)]
@@ -117,7 +121,10 @@ def refit_from_truth(
         lines.append("  the attitude was set aside: the refit is on the gyro alone")
     for label, fit in [*fits, ("from truth", refit)]:
         values = theta if fit is None else fit.theta
-        tail = "" if fit is None else f"  fuel {values[0] - theta[0]:+.3g} kg  whiteness p {fit.attitude_white_p:.2g}"
+        gyro = problem.residuals(values, count=False)
+        tail = f"  gyro residual {math.sqrt(float(np.mean(gyro * gyro))) / noise:.3f} x noise"
+        if fit is not None:
+            tail += f"  fuel {values[0] - theta[0]:+.3g} kg  whiteness p {fit.attitude_white_p:.2g}"
         if fit is not None and d.weights is not None:
             tail += f"  chi-square {joint_objective(fit, d.weights):.1f}"
         lines.append(f"  {spec:22s} {label:10s} {np.array2string(values[k:], precision=4)}{tail}")

@@ -24,20 +24,13 @@ from estimators.diagnostics.verdict import NO_MISSING_EFFECT
 from spaceid_gym.effects.draws import remaining_liquid_kg
 from spaceid_gym.effects.settings import EFFECT_NAMES
 from spaceid_gym.robots import load_robot
-from spaceid_gym.variations import draw_variation
+from spaceid_gym.variations import AXES, draw_variation
 
 #: the matrix row's cells printed per log
 CELLS = (
     "effect",
     "seed",
-    "robot",
-    "rate_hz",
-    "attitude",
-    "noise_scale",
-    "excitation",
-    "size_factor",
-    "slosh_model",
-    "slosh_period_s",
+    *AXES,
     "fuel_consumed_kg",
     "magnitude",
     "expected_power",
